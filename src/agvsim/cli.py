@@ -1,0 +1,144 @@
+"""The ``agvsim`` command."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from agvsim import __version__
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="agvsim: a fast simulator of AGVs (wheeled mobile robots).",
+)
+err = Console(stderr=True)
+out = Console()
+
+
+def _version(value: bool) -> None:
+    if value:
+        out.print(f"agvsim {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print version.")
+    ] = False,
+) -> None:
+    """Simulate AGVs: kinematic models, mazes, lidar, controllers, scenarios."""
+
+
+@app.command()
+def run(
+    scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
+    duration: Annotated[
+        float | None, typer.Option(help="Simulated seconds (overrides file).")
+    ] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed (overrides file).")] = None,
+    out_dir: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("runs/latest"),
+    record_every: Annotated[int, typer.Option(help="Write a trajectory row every N steps.")] = 1,
+    no_plot: Annotated[bool, typer.Option("--no-plot", help="Skip plot.png.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Run a scenario headless; write summary.json, trajectory.csv and plot.png to --out."""
+    from agvsim.runner import run_scenario
+    from agvsim.scenario import ScenarioError
+    from agvsim.sim.engine import ControllerError
+
+    progress = Progress(
+        TextColumn("[bold]simulating"),
+        BarColumn(),
+        TextColumn("{task.fields[t]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err,
+        disable=quiet,
+        transient=False,
+    )
+    task = progress.add_task("run", total=1.0, t="")
+
+    def tick(t: float, total: float) -> None:
+        progress.update(task, completed=t / total, t=f"{t:7.1f} / {total:.1f} s")
+
+    try:
+        with progress:
+            data = run_scenario(scenario, out_dir, duration, seed, record_every, not no_plot, tick)
+    except ScenarioError as e:
+        err.print(f"[red]error:[/red] {e}", highlight=False, markup=True)
+        raise typer.Exit(2) from None
+    except ControllerError as e:
+        err.print(f"[red]controller error:[/red] {e}\noutputs so far written to {out_dir}")
+        raise typer.Exit(1) from None
+    except KeyboardInterrupt:
+        err.print(f"[yellow]interrupted[/yellow]: outputs so far written to {out_dir}")
+        raise typer.Exit(130) from None
+    r = data["run"]
+    out.print(
+        f"simulated {r['simulated_time_s']:.1f} s in {r['wall_time_s']:.2f} s "
+        f"(real-time factor {r['real_time_factor']:.1f}x)"
+    )
+    for rb in data["robots"]:
+        p = rb["final_pose"]
+        out.print(
+            f"  {rb['name']:<12} {rb['model']:<12} distance {rb['distance_m']:7.2f} m  "
+            f"collisions {rb['collisions']:3d}  final ({p['x_m']:.2f}, {p['y_m']:.2f}, "
+            f"{p['theta_rad']:.2f} rad)"
+        )
+    out.print(
+        f"outputs: {out_dir}/summary.json, trajectory.csv" + ("" if no_plot else ", plot.png")
+    )
+
+
+@app.command()
+def validate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")]) -> None:
+    """Check a scenario file (schema, map, robot placement) without running it."""
+    from agvsim.scenario import ScenarioError, build, load_scenario
+
+    try:
+        build(load_scenario(scenario))
+    except ScenarioError as e:
+        if not e.source:
+            e = ScenarioError(str(scenario), e.problems)
+        err.print(f"[red]error:[/red] {e}", highlight=False)
+        raise typer.Exit(2) from None
+    out.print(f"{scenario}: valid")
+
+
+@app.command()
+def bench(
+    quick: Annotated[bool, typer.Option("--quick", help="Short version (under a minute).")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Measure ray-casting throughput, steps/s and real-time factor for 1, 100, 1000 robots."""
+    from agvsim.bench import run_benchmarks
+
+    result = run_benchmarks(quick=quick, log=None if as_json else err.print)
+    if as_json:
+        sys.stdout.write(json.dumps(result) + "\n")
+    else:
+        out.print_json(json.dumps(result))
+
+
+@app.command()
+def models() -> None:
+    """List the kinematic models and their parameters."""
+    from dataclasses import MISSING, fields
+
+    from agvsim.kinematics import MODELS
+
+    for name, cls in MODELS.items():
+        params = ", ".join(f"{f.name}={f.default}" for f in fields(cls) if f.default is not MISSING)
+        out.print(f"[bold]{name}[/bold]: wheels {list(cls.wheel_names)}; {params}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    app()

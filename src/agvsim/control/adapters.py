@@ -1,0 +1,29 @@
+"""Adapters that let a twist-commanding behaviour drive a robot in forward (wheel) mode."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agvsim.control.api import BatchController, BatchObservation
+
+
+class WheelsFromTwist:
+    """Wraps a batch controller that outputs twists ``(k, 3)`` and hands the engine driven
+    wheel speeds (+ steering), computed with the robots' own inverse kinematics."""
+
+    def __init__(self, inner: BatchController, model: object):
+        self.inner, self.model = inner, model
+
+    def reset(self, k: int, rng: np.random.Generator) -> None:
+        self.inner.reset(k, rng)
+
+    def step(self, obs: BatchObservation) -> np.ndarray:
+        twist = np.asarray(self.inner.step(obs), dtype=np.float64)
+        wheels = self.model.inverse(twist)  # type: ignore[attr-defined]
+        drive = wheels.speeds[:, list(self.model.driven_wheels)]  # type: ignore[attr-defined]
+        if self.model.has_steering:  # type: ignore[attr-defined]
+            return np.concatenate([drive, wheels.steering[:, None]], axis=1)
+        return drive
+
+    def __getattr__(self, name: str):  # state names etc. come from the wrapped behaviour
+        return getattr(self.inner, name)

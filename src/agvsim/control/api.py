@@ -1,0 +1,113 @@
+"""The controller API.
+
+A controller turns what a robot observes into a command, once per kinematics step:
+
+* a plain function ``obs -> command``, or
+* an object with ``reset()`` and ``step(obs) -> command``, or
+* a *batch* controller (``BatchController``) that drives several robots with one call on
+  arrays: the fast path used by the built-in behaviours.
+
+A command is, in **inverse** mode, a body twist ``(vx m/s, vy m/s, omega rad/s)``
+(a ``Twist`` or any 3 numbers); in **forward** mode, the driven wheels' speeds in rad/s
+followed, for car-like models, by the steering angle in rad (a ``WheelCommand`` or numbers).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LaserScan:
+    """One scan in ``sensor_msgs/LaserScan`` layout (inf = no return, -inf = too close)."""
+
+    stamp_s: float
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_min_m: float
+    range_max_m: float
+    ranges: np.ndarray  # (B,) m
+
+    @property
+    def hits(self) -> np.ndarray:
+        """(B,) bool: the thesis rangers' hit flag (a return within range)."""
+        return np.isfinite(self.ranges) | (self.ranges == -np.inf)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What one robot's controller sees at time ``t_s``."""
+
+    t_s: float
+    name: str
+    scans: dict[str, LaserScan]
+    odom_pose: np.ndarray  # (3,) dead-reckoned x, y, theta from wheel encoders
+    wheel_speeds: np.ndarray  # (W,) measured rad/s
+    bump: bool  # collided during the last step
+    true_pose: np.ndarray  # (3,) GROUND TRUTH x, y, theta: not available to a real robot
+
+
+@dataclass(frozen=True)
+class Twist:
+    vx: float = 0.0
+    vy: float = 0.0
+    omega: float = 0.0
+
+
+@dataclass(frozen=True)
+class WheelCommand:
+    speeds: Sequence[float] = ()  # driven wheels, rad/s, in the model's driven-wheel order
+    steering: float = 0.0  # rad, car-like models only
+
+
+@dataclass
+class BatchObservation:
+    """Observations of a group of k robots, as arrays."""
+
+    t_s: float
+    robots: np.ndarray  # (k,) robot indices in the simulation
+    ranges: dict[str, np.ndarray]  # sensor name -> (k, B) latest readings
+    odom_pose: np.ndarray  # (k, 3)
+    bump: np.ndarray  # (k,) bool
+    true_pose: np.ndarray  # (k, 3) GROUND TRUTH
+    extra: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class BatchController(Protocol):
+    """Drives k robots at once. ``step`` returns a ``(k, m)`` command array: m = 3 twist values
+    in inverse mode, or the driven wheel speeds (+ steering) in forward mode."""
+
+    def reset(self, k: int, rng: np.random.Generator) -> None: ...
+
+    def step(self, obs: BatchObservation) -> np.ndarray: ...
+
+
+Controller = Callable[[Observation], object]
+
+
+def command_to_array(cmd: object, width: int, mode: str, name: str, t_s: float) -> np.ndarray:
+    """Normalise a controller's return value to ``width`` floats, with a clear error."""
+    if isinstance(cmd, Twist):
+        values = [cmd.vx, cmd.vy, cmd.omega]
+    elif isinstance(cmd, WheelCommand):
+        values = list(cmd.speeds) + ([cmd.steering] if width > len(cmd.speeds) else [])
+    else:
+        try:
+            values = np.asarray(cmd, dtype=np.float64).ravel().tolist()
+        except (TypeError, ValueError):
+            values = None
+    if values is None or len(values) != width:
+        what = "a Twist or (vx, vy, omega)" if mode == "inverse" else (
+            f"a WheelCommand or {width} numbers (driven wheel speeds rad/s"
+            + (", then steering rad)" if width else ")")
+        )
+        raise ValueError(
+            f"controller of robot {name!r} at t={t_s:.3f} s returned {cmd!r}; "
+            f"in {mode} mode it must return {what}"
+        )
+    return np.asarray(values, dtype=np.float64)

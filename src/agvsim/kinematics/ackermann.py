@@ -1,0 +1,119 @@
+"""Ackermann steering: two steered front wheels, two driven rear wheels (thesis 4.2.1, eq. 3-4).
+
+Reference point P is the rear axle centre; ``wheelbase_m`` L, ``half_track_m`` l. The command
+is the rear wheel speeds and the bicycle steering angle delta (the angle of a virtual wheel
+midway between the front wheels):
+
+    forward:  vx = r (phi_rl + phi_rr) / 2,   vy = 0,   omega = vx tan(delta) / L
+    inverse:  R = L / tan(delta) = vx / omega
+              rear wheels  (R -/+ l) vx / (R r) = (vx -/+ omega l) / r
+              front wheels angle atan(L / (R -/+ l)), speed sqrt((R -/+ l)^2 + L^2) |omega| / r
+The true Ackermann geometry gives each front wheel its own angle (inner wheel steers more).
+``steering_geometry="parallel"`` reproduces the thesis's approximation (both wheels at delta).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from agvsim.kinematics.base import WheelState, as_twists, check_positive, wheel_heading
+
+
+@dataclass(frozen=True)
+class Ackermann:
+    wheel_radius_m: float | np.ndarray = 0.1
+    wheelbase_m: float | np.ndarray = 0.5
+    half_track_m: float | np.ndarray = 0.2
+    max_wheel_speed_rad_s: float | np.ndarray = 20.0
+    max_steer_rad: float | np.ndarray = np.deg2rad(35.0)
+    max_steer_rate_rad_s: float | np.ndarray = 2.0
+    steering_geometry: Literal["ackermann", "parallel"] = "ackermann"
+
+    kind: ClassVar[str] = "ackermann"
+    wheel_names: ClassVar[tuple[str, ...]] = (
+        "front_left",
+        "front_right",
+        "rear_left",
+        "rear_right",
+    )
+    driven_wheels: ClassVar[tuple[int, ...]] = (2, 3)
+    steered_wheels: ClassVar[tuple[int, ...]] = (0, 1)
+    has_steering: ClassVar[bool] = True
+    holonomic: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        check_positive(
+            self,
+            "wheel_radius_m",
+            "wheelbase_m",
+            "half_track_m",
+            "max_wheel_speed_rad_s",
+            "max_steer_rad",
+            "max_steer_rate_rad_s",
+        )
+        if self.steering_geometry not in ("ackermann", "parallel"):
+            raise ValueError(
+                f"Ackermann.steering_geometry must be 'ackermann' or 'parallel', "
+                f"got {self.steering_geometry!r}"
+            )
+        if np.any(np.asarray(self.max_steer_rad) >= np.pi / 2):
+            raise ValueError(
+                f"Ackermann.max_steer_rad must be below pi/2 rad (90 deg), got {self.max_steer_rad}"
+            )
+
+    def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray:
+        """drive ``(N, 2)`` rear (left, right) rad/s, steering ``(N,)`` rad -> twist ``(N, 3)``."""
+        r, L = self.wheel_radius_m, self.wheelbase_m
+        vx = r * (drive[..., 0] + drive[..., 1]) / 2.0
+        d = np.zeros_like(vx) if steering is None else steering
+        return np.stack([vx, np.zeros_like(vx), vx * np.tan(d) / L], axis=-1)
+
+    def inverse(self, twist: np.ndarray) -> WheelState:
+        t = as_twists(twist)
+        r, L, l = self.wheel_radius_m, self.wheelbase_m, self.half_track_m
+        vx, w = t[..., 0], t[..., 2]
+        planar = np.stack([vx, np.zeros_like(vx), w], axis=-1)
+        delta, _ = wheel_heading(L, 0.0, planar)
+        a_fl, s_fl = wheel_heading(L, l, planar)
+        a_fr, s_fr = wheel_heading(L, -l, planar)
+        if self.steering_geometry == "parallel":
+            a_fl, a_fr = delta, delta
+        speeds = np.stack([s_fl / r, s_fr / r, (vx - w * l) / r, (vx + w * l) / r], axis=-1)
+        return WheelState(speeds, np.stack([a_fl, a_fr], axis=-1), delta)
+
+    def drive_for(self, twist: np.ndarray, steering: np.ndarray) -> np.ndarray:
+        """Rear wheel speeds that keep the commanded forward speed with the wheels at
+        ``steering`` (the yaw rate then follows from the steering: omega = vx tan(delta) / L)."""
+        r, L, l = self.wheel_radius_m, self.wheelbase_m, self.half_track_m
+        vx = twist[..., 0]
+        w = vx * np.tan(steering) / L
+        return np.stack([(vx - w * l) / r, (vx + w * l) / r], axis=-1)
+
+    def steer_angles_for(self, steering: np.ndarray) -> np.ndarray:
+        """Per-wheel angles (front_left, front_right) for bicycle angle(s) ``steering``."""
+        d = np.asarray(steering, dtype=np.float64)
+        if self.steering_geometry == "parallel":
+            return np.stack([d, d], axis=-1)
+        L, l = self.wheelbase_m, self.half_track_m
+        k = np.tan(d) / L  # curvature
+        # wheel at (L, +-l): direction of (1 - k*(+-l), k L)
+        # atan (not atan2): an inner wheel past 90 deg is reported folded into (-pi/2, pi/2],
+        # as inverse() does, rolling backwards rather than turned round
+        with np.errstate(divide="ignore"):
+            return np.stack(
+                [np.arctan(k * L / (1.0 - k * l)), np.arctan(k * L / (1.0 + k * l))], axis=-1
+            )
+
+    def wheel_positions_m(self) -> np.ndarray:
+        L = np.asarray(self.wheelbase_m, dtype=np.float64)
+        l = np.asarray(self.half_track_m, dtype=np.float64) + 0.0 * L
+        L = L + 0.0 * l
+        z = np.zeros_like(L)
+        pts = [(L, l), (L, -l), (z, l), (z, -l)]
+        return np.stack([np.stack(p, -1) for p in pts], axis=-2)
+
+    def steering_limits(self) -> tuple[float | np.ndarray, float | np.ndarray]:
+        return (self.max_steer_rad, self.max_steer_rate_rad_s)

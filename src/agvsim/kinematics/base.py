@@ -1,0 +1,158 @@
+"""Shared kinematics: the model protocol, SE(2) integration and wheel-limit helpers.
+
+Arrays are batched over robots: a pose or twist array is ``(N, 3)``; wheel speeds are
+``(N, W)`` in rad/s; steering angles are in rad. A model's parameters may be Python floats (one
+shared value) or ``(N,)`` arrays (one value per robot); the equations broadcast either way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import ClassVar, Protocol, TypeVar
+
+import numpy as np
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(a: np.ndarray | float) -> np.ndarray:
+    """Wrap angle(s) in rad to (-pi, pi]."""
+    out = np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), TWO_PI)
+    # np.mod may round a tiny negative remainder up to exactly 2 pi, giving -pi
+    return np.where(out <= -np.pi, np.pi, out)
+
+
+def integrate_se2(poses: np.ndarray, twists: np.ndarray, dt: float) -> np.ndarray:
+    """Move poses ``(N, 3)`` (x, y, theta; world) by body twists ``(N, 3)`` (vx, vy, omega; robot
+    frame) held constant for ``dt`` seconds, exactly (SE(2) exponential map, not Euler steps).
+
+    In the robot frame at the start of the step the displacement is
+        dx = (vx sin(w dt) - vy (1 - cos(w dt))) / w
+        dy = (vx (1 - cos(w dt)) + vy sin(w dt)) / w
+    with the limits vx dt, vy dt as w -> 0 (a Taylor series is used for small w dt).
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    twists = np.asarray(twists, dtype=np.float64)
+    vx, vy, w = twists[..., 0], twists[..., 1], twists[..., 2]
+    a = w * dt
+    small = np.abs(a) < 1e-6
+    a_safe = np.where(small, 1.0, a)
+    # s = sin(a)/a, c = (1 - cos(a))/a, each with a series near zero
+    s = np.where(small, 1.0 - a * a / 6.0, np.sin(a_safe) / a_safe)
+    # (1 - cos a) / a written as 2 sin^2(a/2) / a: no cancellation for small a
+    c = np.where(small, a / 2.0 - a**3 / 24.0, 2.0 * np.sin(a_safe / 2.0) ** 2 / a_safe)
+    dx = (vx * s - vy * c) * dt
+    dy = (vx * c + vy * s) * dt
+    th = poses[..., 2]
+    ct, st = np.cos(th), np.sin(th)
+    out = np.empty_like(poses)
+    out[..., 0] = poses[..., 0] + ct * dx - st * dy
+    out[..., 1] = poses[..., 1] + st * dx + ct * dy
+    out[..., 2] = wrap_angle(th + a)
+    return out
+
+
+def saturation_scale(speeds: np.ndarray, max_speed: np.ndarray | float) -> np.ndarray:
+    """Per-robot factor in (0, 1] that brings every wheel speed of ``speeds (N, W)`` within
+    ``max_speed`` rad/s. Scaling all wheels of a robot by one factor keeps the direction of
+    the commanded motion (the twist is linear in the wheel speeds)."""
+    peak = np.max(np.abs(speeds), axis=-1) if speeds.shape[-1] else np.zeros(speeds.shape[:-1])
+    limit = np.broadcast_to(np.asarray(max_speed, dtype=np.float64), peak.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(peak > limit, limit / np.where(peak > 0, peak, 1.0), 1.0)
+    return scale
+
+
+def wheel_heading(px: np.ndarray | float, py: np.ndarray | float, twists: np.ndarray):
+    """Steering angle and signed speed (m/s) that a steered standard wheel at (px, py) in the
+    robot frame needs for body twist(s) ``(N, 3)``. The angle is in (-pi/2, pi/2]; driving
+    backwards gives a negative speed rather than a flipped wheel."""
+    vx, vy, w = twists[..., 0], twists[..., 1], twists[..., 2]
+    ux = vx - w * py
+    uy = vy + w * px
+    angle = np.arctan2(uy, ux)
+    speed = np.hypot(ux, uy)
+    flip = (angle > np.pi / 2) | (angle <= -np.pi / 2)
+    angle = np.where(flip, wrap_angle(angle + np.pi), angle)
+    speed = np.where(flip, -speed, speed)
+    # no motion: keep the wheel straight
+    still = (np.abs(ux) < 1e-12) & (np.abs(uy) < 1e-12)
+    return np.where(still, 0.0, angle), np.where(still, 0.0, speed)
+
+
+@dataclass(frozen=True)
+class WheelState:
+    """What the inverse kinematics gives for body twists ``(N, 3)``."""
+
+    speeds: np.ndarray  # (N, W) rad/s of every wheel, in the model's ``wheel_names`` order
+    steer_angles: np.ndarray  # (N, S) rad of every steered wheel, ``steered_wheels`` order
+    steering: np.ndarray  # (N,) rad: the single steering command (bicycle angle), 0 if none
+
+
+class KinematicModel(Protocol):
+    """A wheeled-robot kinematic model.
+
+    forward(drive, steering) -> twist: what the robot does for given driven-wheel speeds (and
+    steering angle, for car-like models). inverse(twist) -> WheelState: every wheel's speed and
+    every steered wheel's angle for a body twist. Both are batched over robots.
+    """
+
+    kind: ClassVar[str]
+    wheel_names: ClassVar[tuple[str, ...]]
+    driven_wheels: ClassVar[tuple[int, ...]]  # indices commanded in forward mode
+    steered_wheels: ClassVar[tuple[int, ...]]  # indices that have a steering angle
+    has_steering: ClassVar[bool]  # True when the command includes a steering angle
+    holonomic: ClassVar[bool]
+
+    wheel_radius_m: float | np.ndarray
+    max_wheel_speed_rad_s: float | np.ndarray
+
+    def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray: ...
+
+    def inverse(self, twist: np.ndarray) -> WheelState: ...
+
+    def drive_for(self, twist: np.ndarray, steering: np.ndarray) -> np.ndarray: ...
+
+    def wheel_positions_m(self) -> np.ndarray: ...
+
+    def steering_limits(self) -> tuple[np.ndarray | float, np.ndarray | float]: ...
+
+
+M = TypeVar("M")
+
+
+def stack_models(models: list[M]) -> M:
+    """One model whose parameters are ``(N,)`` arrays, from N models of the same class."""
+    if not models:
+        raise ValueError("stack_models needs at least one model")
+    cls = type(models[0])
+    if any(type(m) is not cls for m in models):
+        raise TypeError("stack_models needs models of one class")
+    values = {}
+    for f in fields(models[0]):  # type: ignore[arg-type]
+        vals = [getattr(m, f.name) for m in models]
+        if isinstance(vals[0], int | float | np.floating | np.ndarray):
+            values[f.name] = np.asarray(vals, dtype=np.float64)
+        else:
+            if any(v != vals[0] for v in vals):
+                raise ValueError(f"models differ in non-numeric field {f.name!r}: {vals}")
+            values[f.name] = vals[0]
+    return replace(models[0], **values)  # type: ignore[type-var]
+
+
+def as_twists(twist: np.ndarray) -> np.ndarray:
+    t = np.asarray(twist, dtype=np.float64)
+    if t.shape[-1] != 3:
+        raise ValueError(f"a twist array must end in 3 values (vx, vy, omega), got shape {t.shape}")
+    return t
+
+
+def check_positive(model: object, *names: str) -> None:
+    """Raise ValueError naming the parameter when a dimension is not positive and finite."""
+    for name in names:
+        v = np.asarray(getattr(model, name), dtype=np.float64)
+        if not np.all(np.isfinite(v)) or np.any(v <= 0):
+            raise ValueError(
+                f"{type(model).__name__}.{name} must be a positive number of metres or rad/s, "
+                f"got {getattr(model, name)!r}"
+            )

@@ -1,0 +1,110 @@
+"""Run outputs: ``trajectory.csv`` streamed while the run goes, ``summary.json`` at the end.
+
+The CSV is flushed about once a second of wall time, so an interrupted or failed run keeps
+what it recorded.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agvsim.sim.engine import W_MAX, Simulation
+
+COLUMNS = (
+    ["t", "robot", "x", "y", "theta", "vx", "vy", "omega"]
+    + [f"wheel{k + 1}_rad_s" for k in range(W_MAX)]
+    + ["steering_rad", "odom_x", "odom_y", "odom_theta", "bump"]
+)
+
+
+class TrajectoryWriter:
+    """Appends one row per robot every ``every`` steps. Wheel columns follow each model's
+    ``wheel_names`` order (listed per robot in summary.json); unused columns stay empty."""
+
+    def __init__(self, path: Path, sim: Simulation, every: int = 1):
+        self.path, self.sim, self.every = Path(path), sim, max(1, int(every))
+        self._f = self.path.open("w", encoding="utf-8", newline="")
+        self._f.write(",".join(COLUMNS) + "\n")
+        self._names = [r.name for r in sim.robots]
+        self._nw = [len(r.model.wheel_names) for r in sim.robots]
+        self._last_flush = time.monotonic()
+        self.rows = 0
+
+    def record(self) -> None:
+        st = self.sim.state
+        if st.step % self.every:
+            return
+        lines = []
+        for i, name in enumerate(self._names):
+            w = st.wheel_speeds[i]
+            wheels = [f"{w[k]:.6g}" if k < self._nw[i] else "" for k in range(W_MAX)]
+            p, v, o = st.poses[i], st.twists[i], st.odom_poses[i]
+            lines.append(
+                f"{st.t_s:.4f},{name},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},"
+                f"{v[0]:.6g},{v[1]:.6g},{v[2]:.6g},{','.join(wheels)},{st.steering[i]:.6g},"
+                f"{o[0]:.6f},{o[1]:.6f},{o[2]:.6f},{int(st.bump[i])}\n"
+            )
+        self._f.write("".join(lines))
+        self.rows += len(lines)
+        now = time.monotonic()
+        if now - self._last_flush > 1.0:
+            self._f.flush()
+            self._last_flush = now
+
+    def close(self) -> None:
+        if not self._f.closed:
+            self._f.flush()
+            self._f.close()
+
+
+def summary(sim: Simulation, wall_s: float, extra: dict[str, Any] | None = None) -> dict:
+    st = sim.state
+    robots = []
+    for i, r in enumerate(sim.robots):
+        p, o = st.poses[i], st.odom_poses[i]
+        robots.append(
+            {
+                "name": r.name,
+                "model": r.model.kind,
+                "mode": str(r.mode),
+                "wheel_names": list(r.model.wheel_names),
+                "distance_m": round(float(st.distance_m[i]), 6),
+                "collisions": int(st.collisions[i]),
+                "final_pose": {"x_m": float(p[0]), "y_m": float(p[1]), "theta_rad": float(p[2])},
+                "odometry_final_pose": {
+                    "x_m": float(o[0]),
+                    "y_m": float(o[1]),
+                    "theta_rad": float(o[2]),
+                },
+                "odometry_error_m": float(math.hypot(o[0] - p[0], o[1] - p[1])),
+            }
+        )
+    run = {
+        "simulated_time_s": float(st.t_s),
+        "steps": int(st.step),
+        "wall_time_s": float(wall_s),
+        "real_time_factor": float(st.t_s / wall_s) if wall_s > 0 else None,
+        "seed": sim.seed,
+        "dt_s": sim.dt_s,
+    }
+    if extra:
+        run.update(extra)
+    return {"run": run, "robots": robots}
+
+
+def write_summary(path: Path, data: dict) -> None:
+    Path(path).write_text(json.dumps(data, indent=2, default=_jsonable) + "\n", encoding="utf-8")
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, Path):
+        return str(v)
+    raise TypeError(f"not JSON serialisable: {type(v).__name__}")

@@ -1,0 +1,93 @@
+"""Run a scenario headless and write its outputs (summary.json, trajectory.csv, plot.png).
+
+Whatever happens (the end, Ctrl-C, a failing controller), the outputs recorded so far are
+written before returning or re-raising.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from agvsim.record.outputs import TrajectoryWriter, summary, write_summary
+from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
+from agvsim.sim.engine import ControllerError, Simulation
+
+
+def run_scenario(
+    scenario: str | Path | Scenario,
+    out_dir: str | Path,
+    duration_s: float | None = None,
+    seed: int | None = None,
+    record_every: int = 1,
+    plot: bool = True,
+    progress: Callable[[float, float], None] | None = None,
+) -> dict:
+    """Run to the end and write outputs; returns the summary dict. Raises ScenarioError for a
+    bad scenario (before anything runs); after a ControllerError or KeyboardInterrupt the
+    outputs are written and the exception re-raised."""
+    if isinstance(scenario, Scenario):
+        sc, source = scenario, "scenario"
+    else:
+        source = str(scenario)
+        sc = load_scenario(scenario)
+    try:
+        sim = build(sc, seed=seed)
+    except ScenarioError as err:
+        raise ScenarioError(source, err.problems) from None
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    total = float(duration_s if duration_s is not None else sc.duration_s)
+    if not total > 0:
+        raise ScenarioError(source, [f"duration must be > 0 s, got {total}"])
+    n_steps = int(round(total / sim.dt_s))
+    writer = TrajectoryWriter(out / "trajectory.csv", sim, record_every)
+    trail: dict[str, list] = {r.name: [] for r in sim.robots}
+    trail_every = max(1, n_steps // 4000)
+    status, error = "completed", None
+    t0 = time.perf_counter()
+    writer.record()
+    try:
+        for k in range(n_steps):
+            sim.step()
+            writer.record()
+            if k % trail_every == 0:
+                for i, r in enumerate(sim.robots):
+                    trail[r.name].append(sim.state.poses[i, :2].copy())
+            if progress is not None and (k % 50 == 0 or k == n_steps - 1):
+                progress(sim.state.t_s, total)
+    except ControllerError as err:
+        status, error = "controller_error", str(err)
+        raise
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    finally:
+        wall = time.perf_counter() - t0
+        writer.close()
+        data = summary(
+            sim,
+            wall,
+            {
+                "scenario": sc.name,
+                "source": source,
+                "status": status,
+                "error": error,
+                "requested_duration_s": total,
+                "trajectory_rows": writer.rows,
+            },
+        )
+        write_summary(out / "summary.json", data)
+        if plot:
+            _plot(sim, trail, out / "plot.png", sc.name)
+    return data
+
+
+def _plot(sim: Simulation, trail: dict[str, list], path: Path, title: str) -> None:
+    from agvsim.viz.plot import plot_run
+
+    xy = {k: np.array(v).reshape(-1, 2) for k, v in trail.items()}
+    plot_run(sim, xy, path, f"{title} (t = {sim.state.t_s:.1f} s)")

@@ -1,0 +1,598 @@
+"""The scenario file: one validated YAML document holds the world, the robots, duration and seed.
+
+``load_scenario(path)`` parses and validates (unknown keys get "did you mean ...?", bad values a
+message naming the field, the value and what is allowed); ``build(scenario)`` turns it into a
+ready ``Simulation``. The schema is documented in docs/scenario.md.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib.util
+from dataclasses import fields as dc_fields
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+
+from agvsim.control.adapters import WheelsFromTwist
+from agvsim.control.avoid import ObstacleAvoidance
+from agvsim.control.script import ScriptController, ScriptStep
+from agvsim.kinematics import MODELS, stack_models
+from agvsim.sensors.range_sensor import RangeSensorSpec
+from agvsim.sim.engine import Binding, Simulation
+from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
+from agvsim.world import loaders, mazes
+from agvsim.world.grid import OccupancyGrid
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot run; ``problems`` lists one clear line per fault."""
+
+    def __init__(self, source: str, problems: list[str]):
+        self.source, self.problems = source, problems
+        super().__init__(f"{source}: " + "; ".join(problems))
+
+    def __str__(self) -> str:
+        lines = "\n".join(f"  - {p}" for p in self.problems)
+        return f"{self.source} is not a valid scenario:\n{lines}"
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# ---------------------------------------------------------------------------------- world
+class RandomMaze(_Strict):
+    rows: int = Field(8, ge=1, le=500, description="rooms north-south")
+    cols: int = Field(8, ge=1, le=500, description="rooms west-east")
+    seed: int = 0
+    corridor_cells: int = Field(2, ge=1, le=50)
+    wall_cells: int = Field(1, ge=1, le=50)
+    loop_fraction: float = Field(0.0, ge=0.0, le=1.0)
+
+
+class BoxObstacle(_Strict):
+    x_m: float
+    y_m: float
+    theta_deg: float = 0.0
+    length_m: float = Field(gt=0)
+    width_m: float = Field(gt=0)
+
+
+class WorldConfig(_Strict):
+    maze: Literal["thesis_fig16", "thesis_c1"] | None = None
+    matrix: list[list[int]] | None = None
+    picture: str | None = Field(None, description="text picture: '#' wall, '.' free")
+    file: str | None = Field(None, description=".txt .csv .png .pgm or ROS map .yaml")
+    random: RandomMaze | None = None
+    cell_size_m: float = Field(1.0, gt=0, le=100)
+    origin_xy_m: tuple[float, float] | None = None
+    boxes: list[BoxObstacle] = []
+
+    @model_validator(mode="after")
+    def _one_source(self) -> WorldConfig:
+        given = [k for k in ("maze", "matrix", "picture", "file", "random") if getattr(self, k)]
+        if len(given) != 1:
+            raise ValueError(
+                "give exactly one map source out of maze, matrix, picture, file, random "
+                f"(got {given or 'none'})"
+            )
+        return self
+
+
+# ---------------------------------------------------------------------------------- robots
+class Pose(_Strict):
+    x_m: float = 0.0
+    y_m: float = 0.0
+    theta_deg: float = 0.0
+
+
+class Body(_Strict):
+    length_m: float = Field(0.6, gt=0, le=20)
+    width_m: float = Field(0.45, gt=0, le=20)
+    offset_x_m: float | None = Field(None, description="footprint centre ahead of P")
+
+
+class SensorCommon(_Strict):
+    name: str | None = None
+    rate_hz: float | None = Field(None, gt=0, le=10000)
+    range_min_m: float = Field(0.0, ge=0)
+    noise_std_m: float = Field(0.0, ge=0)
+    dropout_prob: float = Field(0.0, ge=0, le=1)
+    mount_x_m: float | None = None
+    mount_y_m: float = 0.0
+    mount_yaw_deg: float = 0.0
+
+
+class RangersConfig(SensorCommon):
+    type: Literal["rangers"]
+    range_max_m: float = Field(1.0, gt=0, le=1000)
+
+
+class LidarConfig(SensorCommon):
+    type: Literal["lidar"]
+    beams: int = Field(240, ge=1, le=100000)
+    fov_deg: float = Field(360.0, gt=0, le=360)
+    angle_min_deg: float | None = None
+    range_max_m: float = Field(10.0, gt=0, le=1000)
+
+
+SensorConfig = Annotated[RangersConfig | LidarConfig, Field(discriminator="type")]
+
+
+class OdometryConfig(_Strict):
+    wheel_noise_rel: float = Field(0.01, ge=0, le=1)
+    wheel_noise_abs_rad_s: float = Field(0.0, ge=0)
+    steering_noise_deg: float = Field(0.0, ge=0)
+
+
+class ScriptStepConfig(_Strict):
+    duration_s: float = Field(gt=0)
+    twist: list[float] | None = Field(None, description="[vx, omega] or [vx, vy, omega]")
+    wheels: list[float] | None = Field(None, description="driven wheel speeds, rad/s")
+    steering_deg: float = 0.0
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> ScriptStepConfig:
+        if (self.twist is None) == (self.wheels is None):
+            raise ValueError("each script step needs exactly one of 'twist' or 'wheels'")
+        if self.twist is not None and len(self.twist) not in (2, 3):
+            raise ValueError(f"twist must be [vx, omega] or [vx, vy, omega], got {self.twist}")
+        return self
+
+
+class ScriptConfig(_Strict):
+    type: Literal["script"]
+    steps: list[ScriptStepConfig] = Field(min_length=1)
+    loop: bool = False
+
+
+class AvoidConfig(_Strict):
+    type: Literal["avoid"]
+    sensor: str = "rangers"
+    trigger_m: float = Field(0.8, gt=0)
+    speed_m_s: float = Field(0.5, gt=0)
+    turn_rate_rad_s: float = Field(1.0, gt=0)
+
+
+class PythonControllerConfig(_Strict):
+    type: Literal["python"]
+    file: str = Field(description="a .py file next to the scenario (or an absolute path)")
+    name: str = Field("controller", description="function or class defined in the file")
+
+
+class IdleConfig(_Strict):
+    type: Literal["idle"]
+
+
+ControllerConfig = Annotated[
+    ScriptConfig | AvoidConfig | PythonControllerConfig | IdleConfig,
+    Field(discriminator="type"),
+]
+
+
+class RobotConfig(_Strict):
+    name: str = Field(min_length=1)
+    model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
+    mode: ControlMode = ControlMode.INVERSE
+    params: dict[str, float | str] = {}
+    body: Body = Body()
+    pose: Pose = Pose()
+    color: str = "#d62728"
+    sensors: list[SensorConfig] = []
+    odometry: OdometryConfig = OdometryConfig()
+    controller: ControllerConfig = IdleConfig(type="idle")
+
+
+class Scenario(_Strict):
+    name: str = "unnamed scenario"
+    description: str = ""
+    seed: int = 0
+    duration_s: float = Field(60.0, gt=0, le=1e7)
+    dt_s: float = Field(0.02, gt=0, le=1.0)
+    world: WorldConfig
+    robots: list[RobotConfig] = Field(min_length=1)
+    _base_dir: Path = PrivateAttr(default=Path("."))
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> Scenario:
+        names = [r.name for r in self.robots]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"robot names must be unique; repeated: {dup}")
+        return self
+
+
+# ---------------------------------------------------------------------------------- loading
+def _loc(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
+    """Field names of the schema object that ``loc`` (without its last key) points into."""
+    cls: Any = model
+    for part in loc[:-1]:
+        if isinstance(part, int):
+            continue
+        if isinstance(cls, type) and issubclass(cls, BaseModel):
+            if part in cls.model_fields:
+                cls = _inner_model(cls.model_fields[part].annotation)
+            else:  # discriminated union tag, e.g. "rangers"
+                cls = next(
+                    (
+                        m
+                        for m in _union_members(cls)
+                        if "type" in m.model_fields
+                        and part in str(m.model_fields["type"].annotation)
+                    ),
+                    cls,
+                )
+    if isinstance(cls, type) and issubclass(cls, BaseModel):
+        return list(cls.model_fields)
+    names: list[str] = []
+    for m in _union_members(cls):
+        names += list(m.model_fields)
+    return names
+
+
+def _inner_model(ann: Any) -> Any:
+    for arg in getattr(ann, "__args__", ()) or ():
+        inner = _inner_model(arg)
+        if inner is not None:
+            return inner
+    if getattr(ann, "__metadata__", None):
+        return ann
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return ann
+    return ann if getattr(ann, "__origin__", None) is not None else None
+
+
+def _union_members(ann: Any) -> list[type[BaseModel]]:
+    out: list[type[BaseModel]] = []
+    for arg in getattr(ann, "__args__", ()) or ():
+        if isinstance(arg, type) and issubclass(arg, BaseModel):
+            out.append(arg)
+        else:
+            out += _union_members(arg)
+    return out
+
+
+def _did_you_mean(word: str, options: list[str]) -> str:
+    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    return f"{hint} (allowed: {', '.join(sorted(options))})"
+
+
+def _format_errors(err: ValidationError) -> list[str]:
+    out = []
+    for e in err.errors():
+        loc = tuple(e["loc"])
+        where = _loc(loc)
+        if e["type"] == "extra_forbidden":
+            key = str(loc[-1])
+            out.append(
+                f"{where}: unknown key {key!r}" + _did_you_mean(key, _fields_at(Scenario, loc))
+            )
+        elif e["type"] == "missing":
+            out.append(f"{where}: required field is missing")
+        elif e["type"] == "union_tag_invalid":
+            ctx = e.get("ctx", {})
+            tag = ctx.get("tag", "?")
+            expected = ctx.get("expected_tags", "")
+            opts = [t.strip(" '") for t in str(expected).split(",")]
+            out.append(f"{where}: unknown type {tag!r}" + _did_you_mean(str(tag), opts))
+        else:
+            msg = e["msg"].removeprefix("Value error, ")
+            value = e.get("input")
+            shown = (
+                repr(value) if not isinstance(value, dict | list) or len(repr(value)) < 80 else ""
+            )
+            out.append(f"{where}: {msg}" + (f" (got {shown})" if shown else ""))
+    return out
+
+
+def parse_scenario(data: Any, source: str = "scenario") -> Scenario:
+    if not isinstance(data, dict):
+        raise ScenarioError(
+            source, [f"the file must hold a mapping of keys, got {type(data).__name__}"]
+        )
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(source, _format_errors(err)) from None
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(str(path), ["no such file"])
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        line = f"line {mark.line + 1}: " if mark is not None else ""
+        raise ScenarioError(
+            str(path), [f"{line}not valid YAML ({getattr(err, 'problem', err)})"]
+        ) from None
+    scenario = parse_scenario(data, str(path))
+    scenario._base_dir = path.parent
+    return scenario
+
+
+# ---------------------------------------------------------------------------------- building
+def build_grid(cfg: WorldConfig, base_dir: Path) -> OccupancyGrid:
+    res, origin = cfg.cell_size_m, cfg.origin_xy_m
+    if cfg.maze:
+        return (
+            mazes.thesis_maze(cfg.maze, resolution_m=res)
+            if origin is None
+            else OccupancyGrid(mazes.thesis_maze(cfg.maze).occupied, res, origin)
+        )
+    if cfg.matrix is not None:
+        return loaders.grid_from_matrix(cfg.matrix, res, origin, source="world.matrix")
+    if cfg.picture is not None:
+        return loaders.parse_text_picture(cfg.picture, res, origin, source="world.picture")
+    if cfg.random is not None:
+        r = cfg.random
+        return mazes.random_maze(
+            r.rows,
+            r.cols,
+            r.seed,
+            corridor_cells=r.corridor_cells,
+            wall_cells=r.wall_cells,
+            resolution_m=res,
+            loop_fraction=r.loop_fraction,
+        )
+    path = Path(cfg.file or "")
+    if not path.is_absolute():
+        path = base_dir / path
+    return loaders.load_map(path, resolution_m=res, origin_xy_m=origin)
+
+
+def _model(rc: RobotConfig, where: str) -> Any:
+    cls = MODELS[rc.model]
+    allowed = [f.name for f in dc_fields(cls)]
+    kwargs: dict[str, Any] = {}
+    for k, v in rc.params.items():
+        if k not in allowed:
+            raise ScenarioError(
+                "",
+                [
+                    f"{where}.params: unknown parameter {k!r} for model "
+                    f"{rc.model!r}" + _did_you_mean(k, allowed)
+                ],
+            )
+        kwargs[k] = v
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as err:
+        raise ScenarioError("", [f"{where}.params: {err}"]) from None
+
+
+def _sensor(
+    sc: RangersConfig | LidarConfig, mount_x: float, rate_default: float
+) -> RangeSensorSpec:
+    common = dict(
+        range_min_m=sc.range_min_m,
+        rate_hz=sc.rate_hz or rate_default,
+        noise_std_m=sc.noise_std_m,
+        dropout_prob=sc.dropout_prob,
+        mount_xy_m=(mount_x if sc.mount_x_m is None else sc.mount_x_m, sc.mount_y_m),
+        mount_yaw_rad=float(np.deg2rad(sc.mount_yaw_deg)),
+    )
+    if isinstance(sc, RangersConfig):
+        spec = RangeSensorSpec.thesis_rangers(sc.range_max_m, **common)
+    else:
+        amin = None if sc.angle_min_deg is None else float(np.deg2rad(sc.angle_min_deg))
+        spec = RangeSensorSpec.fan(
+            "lidar", sc.beams, float(np.deg2rad(sc.fov_deg)), sc.range_max_m, amin, **common
+        )
+    if sc.name:
+        from dataclasses import replace
+
+        spec = replace(spec, name=sc.name)
+    return spec
+
+
+def robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
+    model = _model(rc, where)
+    # car-like bodies sit ahead of the rear axle; others are centred on P
+    offset = rc.body.offset_x_m
+    if offset is None:
+        offset = float(getattr(model, "wheelbase_m", 0.0)) / 2.0
+    sensors = tuple(
+        _sensor(s, offset, 10.0 if s.type == "lidar" else 1.0 / dt_s) for s in rc.sensors
+    )
+    names = [s.name for s in sensors]
+    if len(set(names)) != len(names):
+        raise ScenarioError(
+            "", [f"{where}.sensors: names must be unique (set 'name'), got {names}"]
+        )
+    th = float(np.deg2rad(rc.pose.theta_deg))
+    return RobotSpec(
+        name=rc.name,
+        model=model,
+        mode=rc.mode,
+        body_length_m=rc.body.length_m,
+        body_width_m=rc.body.width_m,
+        body_offset_x_m=offset,
+        initial_pose=(rc.pose.x_m, rc.pose.y_m, float(np.arctan2(np.sin(th), np.cos(th)))),
+        sensors=sensors,
+        odometry=OdometrySpec(
+            rc.odometry.wheel_noise_rel,
+            rc.odometry.wheel_noise_abs_rad_s,
+            float(np.deg2rad(rc.odometry.steering_noise_deg)),
+        ),
+        color=rc.color,
+    )
+
+
+def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any:
+    path = Path(cfg.file)
+    if not path.is_absolute():
+        path = base_dir / path
+    if not path.is_file():
+        raise ScenarioError("", [f"{where}.controller.file: no such file {str(path)!r}"])
+    spec = importlib.util.spec_from_file_location(f"agvsim_user_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    obj = getattr(module, cfg.name, None)
+    if obj is None:
+        found = [n for n in vars(module) if not n.startswith("_")]
+        raise ScenarioError(
+            "",
+            [
+                f"{where}.controller.name: {cfg.name!r} is not defined in {path.name}"
+                + _did_you_mean(cfg.name, found)
+            ],
+        )
+    return obj() if isinstance(obj, type) else obj
+
+
+def _bindings(sc: Scenario, specs: list[RobotSpec], base_dir: Path) -> list[Binding]:
+    out: list[Binding] = []
+    avoid_groups: dict[tuple, list[int]] = {}
+    for i, rc in enumerate(sc.robots):
+        c, where = rc.controller, f"robots[{i}] ({rc.name})"
+        if isinstance(c, ScriptConfig):
+            steps = []
+            for st in c.steps:
+                twist = None
+                if st.twist is not None:
+                    tw = st.twist
+                    twist = (tw[0], 0.0, tw[1]) if len(tw) == 2 else (tw[0], tw[1], tw[2])
+                if st.wheels is not None:
+                    want = len(specs[i].model.driven_wheels)
+                    if len(st.wheels) != want:
+                        raise ScenarioError(
+                            "",
+                            [
+                                f"{where}.controller.steps: a {rc.model} robot has {want} driven "
+                                f"wheel(s) {_driven_names(specs[i])}, got {len(st.wheels)} speeds "
+                                f"{st.wheels}"
+                            ],
+                        )
+                steps.append(
+                    ScriptStep(
+                        st.duration_s,
+                        twist,
+                        None if st.wheels is None else tuple(st.wheels),
+                        float(np.deg2rad(st.steering_deg)),
+                    )
+                )
+            out.append(Binding(ScriptController(steps, c.loop), (i,)))
+        elif isinstance(c, AvoidConfig):
+            names = [s.name for s in specs[i].sensors]
+            if c.sensor not in names:
+                raise ScenarioError(
+                    "",
+                    [
+                        f"{where}.controller.sensor: the robot has no sensor "
+                        f"{c.sensor!r}" + _did_you_mean(c.sensor, names)
+                    ],
+                )
+            key = (c, rc.model, rc.mode, rc.params.get("steering_geometry"))
+            avoid_groups.setdefault(key, []).append(i)
+        elif isinstance(c, PythonControllerConfig):
+            out.append(Binding(_load_python(c, base_dir, where), (i,)))
+    for (c, _model_kind, mode, _geo), idx in avoid_groups.items():
+        spec0 = specs[idx[0]]
+        sensor = next(s for s in spec0.sensors if s.name == c.sensor)
+        front, back = _cone_beams(sensor)
+        car = [not _can_spin(specs[i].model) for i in idx]
+        ctrl: Any = ObstacleAvoidance(
+            sensor=c.sensor,
+            front_beams=front,
+            back_beams=back,
+            trigger_m=c.trigger_m,
+            speed_m_s=c.speed_m_s,
+            turn_rate_rad_s=c.turn_rate_rad_s,
+            can_spin=~np.array(car),
+        )
+        if mode == ControlMode.FORWARD:
+            ctrl = WheelsFromTwist(ctrl, stack_models([specs[i].model for i in idx]))
+        out.append(Binding(ctrl, tuple(idx), batch=True))
+    return out
+
+
+def _driven_names(spec: RobotSpec) -> list[str]:
+    return [spec.model.wheel_names[k] for k in spec.model.driven_wheels]
+
+
+def _can_spin(model: Any) -> bool:
+    """True when the model can turn on the spot."""
+    if not model.has_steering:
+        return True
+    return bool(np.all(np.asarray(model.max_steer_rad) >= np.pi / 2 - 1e-9))
+
+
+def _cone_beams(sensor: RangeSensorSpec, half_deg: float = 15.0) -> tuple[tuple, tuple]:
+    """Beam indices looking ahead and behind (within +-half_deg; the nearest beam at least)."""
+    ang = np.angle(np.exp(1j * (sensor.beam_angles_rad + sensor.mount_yaw_rad)))
+    out = []
+    for centre in (0.0, np.pi):
+        d = np.abs(np.angle(np.exp(1j * (ang - centre))))
+        sel = np.flatnonzero(d <= np.deg2rad(half_deg))
+        out.append(tuple(int(k) for k in (sel if sel.size else [int(np.argmin(d))])))
+    return out[0], out[1]
+
+
+def build(sc: Scenario, seed: int | None = None, base_dir: Path | None = None) -> Simulation:
+    """A ready ``Simulation`` from a validated scenario; refuses robots inside walls."""
+    base = base_dir or sc._base_dir
+    try:
+        grid = build_grid(sc.world, base)
+    except (loaders.MapFormatError, ValueError) as err:
+        raise ScenarioError("", [f"world: {err}"]) from None
+    boxes = np.array(
+        [
+            (b.x_m, b.y_m, np.deg2rad(b.theta_deg), b.length_m / 2, b.width_m / 2)
+            for b in sc.world.boxes
+        ],
+        dtype=np.float64,
+    ).reshape(-1, 5)
+    specs = [robot_spec(rc, f"robots[{i}] ({rc.name})", sc.dt_s) for i, rc in enumerate(sc.robots)]
+    world = World(grid, boxes)
+    bindings = _bindings(sc, specs, base)
+    sim = Simulation(world, specs, bindings, dt_s=sc.dt_s, seed=sc.seed if seed is None else seed)
+    _check_placement(sim)
+    return sim
+
+
+def _check_placement(sim: Simulation) -> None:
+    fp = sim.footprints(sim.state.poses)
+    xmin, xmax, ymin, ymax = sim.world.grid.extent_m
+    problems = []
+    walls = sim.collider.hit_walls(fp)
+    static = sim.collider.hit_static(fp, sim.world.boxes) if len(sim.world.boxes) else walls & False
+    for i, r in enumerate(sim.robots):
+        x, y, _ = r.initial_pose
+        where = f"robots[{i}] ({r.name}).pose"
+        if not (xmin <= x < xmax and ymin <= y < ymax):
+            problems.append(
+                f"{where}: ({x:g}, {y:g}) is outside the map, which spans x in "
+                f"[{xmin:g}, {xmax:g}) and y in [{ymin:g}, {ymax:g}) m"
+            )
+        elif walls[i]:
+            problems.append(
+                f"{where}: the robot's body at ({x:g}, {y:g}) overlaps a wall "
+                "or sticks out of the map; move it to free floor"
+            )
+        elif static[i]:
+            problems.append(f"{where}: the robot's body at ({x:g}, {y:g}) overlaps a box obstacle")
+    for i, j in sim.collider.overlapping_pairs(fp):
+        problems.append(
+            f"robots {sim.robots[i].name!r} and {sim.robots[j].name!r} start overlapping each other"
+        )
+    if problems:
+        raise ScenarioError("", problems)

@@ -1,0 +1,417 @@
+"""The simulation: a fixed-step loop over all robots at once.
+
+Each step, for every robot together (structure of arrays, a loop over model kinds only):
+
+    commands  = controllers(observations)
+    wheels    = actuate(commands)            # inverse or forward kinematics, limits
+    poses     = move(poses, wheels.twist)    # exact SE(2) integration, swept collision checks
+    odometry  = dead_reckon(wheel encoders)  # noisy encoders, apart from the ground truth
+    scans     = sense(poses)                 # sensors due at this time, one ray-cast call
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agvsim.control.api import (
+    BatchController,
+    BatchObservation,
+    LaserScan,
+    Observation,
+    Twist,
+    WheelCommand,
+    command_to_array,
+)
+from agvsim.kinematics import actuation
+from agvsim.kinematics.base import integrate_se2, stack_models
+from agvsim.sensors.range_sensor import apply_noise
+from agvsim.sensors.raycast import RayCaster
+from agvsim.sim.collide import Collider
+from agvsim.sim.spec import ControlMode, RobotSpec, World
+from agvsim.sim.state import SensorTable, SimState
+
+W_MAX = 4  # most wheels of any model
+S_MAX = 2  # most steered wheels of any model
+
+
+class ControllerError(RuntimeError):
+    """A controller raised or returned an invalid command."""
+
+    def __init__(self, robot: str, t_s: float, cause: BaseException):
+        super().__init__(f"controller of robot {robot!r} failed at t={t_s:.3f} s: {cause}")
+        self.robot, self.t_s, self.cause = robot, t_s, cause
+
+
+@dataclass
+class Binding:
+    """A controller and the robots (indices) it drives. ``batch`` controllers get arrays;
+    others are called once per robot with an ``Observation``."""
+
+    controller: object
+    robots: tuple[int, ...]
+    batch: bool = False
+
+
+@dataclass
+class _Group:
+    """Robots sharing one kinematic model class (parameters stacked per robot)."""
+
+    idx: np.ndarray
+    model: object
+    n_drive: int
+    n_wheels: int
+    n_steer: int
+    cmd_width: int
+    wheel_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+
+class Simulation:
+    def __init__(
+        self,
+        world: World,
+        robots: Sequence[RobotSpec],
+        controllers: Sequence[Binding] = (),
+        dt_s: float = 0.02,
+        seed: int = 0,
+    ):
+        if not robots:
+            raise ValueError("a simulation needs at least one robot")
+        names = [r.name for r in robots]
+        if len(set(names)) != len(names):
+            raise ValueError(f"robot names must be unique, got {names}")
+        if not dt_s > 0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        self.world, self.robots, self.dt_s, self.seed = world, list(robots), float(dt_s), seed
+        self.bindings = list(controllers)
+        self.n = len(self.robots)
+        self.caster = RayCaster(world.grid)
+        self.collider = Collider(world.grid)
+        self.sensors = SensorTable.build(self.robots)
+        self._groups = self._build_groups()
+        hl_hw = np.array([r.footprint_half_m for r in self.robots], dtype=np.float64)
+        self._half = hl_hw  # (N, 2)
+        self._offset = np.array([r.body_offset_x_m for r in self.robots], dtype=np.float64)
+        self._radius = np.array([r.bounding_radius_m for r in self.robots])
+        self._substep_len = 0.5 * min(world.grid.resolution_m, float(hl_hw.min()))
+        self._odo = np.array(
+            [
+                (
+                    r.odometry.wheel_noise_rel,
+                    r.odometry.wheel_noise_abs_rad_s,
+                    r.odometry.steering_noise_rad,
+                )
+                for r in self.robots
+            ]
+        )
+        self.reset(seed)
+
+    # ------------------------------------------------------------------ set-up
+    def _build_groups(self) -> list[_Group]:
+        by_kind: dict[tuple, list[int]] = {}
+        for i, r in enumerate(self.robots):
+            key = (type(r.model), getattr(r.model, "steering_geometry", None))
+            by_kind.setdefault(key, []).append(i)
+        groups = []
+        for idx in by_kind.values():
+            model = stack_models([self.robots[i].model for i in idx])
+            n_drive = len(model.driven_wheels)
+            groups.append(
+                _Group(
+                    idx=np.array(idx),
+                    model=model,
+                    n_drive=n_drive,
+                    n_wheels=len(model.wheel_names),
+                    n_steer=len(model.steered_wheels),
+                    cmd_width=n_drive + int(model.has_steering),
+                )
+            )
+        return groups
+
+    def cmd_width(self, i: int) -> int:
+        """Numbers a forward-mode command of robot i holds (driven wheels + steering)."""
+        m = self.robots[i].model
+        return len(m.driven_wheels) + int(m.has_steering)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Back to the initial poses at t = 0 with a fresh generator; senses once."""
+        if seed is not None:
+            self.seed = seed
+        self.rng = np.random.default_rng(self.seed)
+        n = self.n
+        poses = np.array([r.initial_pose for r in self.robots], dtype=np.float64)
+        self.state = SimState.zeros(n, self.sensors, W_MAX, S_MAX, poses)
+        # command buffers: twist (N, 3) and wheels (N, 3 = up to 4 driven? ) per robot
+        self._cmd_twist = np.zeros((n, 3))
+        self._cmd_wheels = np.zeros((n, W_MAX + 1))
+        self._cmd_is_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
+        for b in self.bindings:
+            if b.batch:
+                b.controller.reset(len(b.robots), self.rng)
+            elif hasattr(b.controller, "reset"):
+                b.controller.reset()
+        self._sense(force=True)
+
+    # ------------------------------------------------------------------ the step
+    def step(self) -> None:
+        """Advance the simulation by one kinematics step of ``dt_s`` seconds."""
+        self._control()
+        act = self._actuate()
+        self._move(act)
+        self._dead_reckon(act)
+        self.state.t_s = (self.state.step + 1) * self.dt_s
+        self.state.step += 1
+        self._sense()
+
+    def run(self, duration_s: float) -> None:
+        for _ in range(int(round(duration_s / self.dt_s))):
+            self.step()
+
+    # ------------------------------------------------------------------ stages
+    def _control(self) -> None:
+        st = self.state
+        for b in self.bindings:
+            idx = np.asarray(b.robots)
+            live = idx[~st.stopped[idx]]
+            if live.size == 0:
+                continue
+            if b.batch:
+                self._control_batch(b.controller, idx)
+            else:
+                for i in live:
+                    self._control_one(b.controller, int(i))
+
+    def _control_batch(self, ctrl: BatchController, idx: np.ndarray) -> None:
+        obs = self.batch_observation(idx)
+        try:
+            cmd = np.asarray(ctrl.step(obs), dtype=np.float64)
+        except Exception as exc:  # noqa: BLE001 - reported with robot names
+            raise ControllerError(",".join(self.robots[i].name for i in idx), obs.t_s, exc) from exc
+        for k, i in enumerate(idx):
+            self._store_command(int(i), cmd[k], None)
+
+    def _control_one(self, ctrl: object, i: int) -> None:
+        obs = self.observation(i)
+        try:
+            step = getattr(ctrl, "step", None)
+            cmd = step(obs) if step is not None else ctrl(obs)  # type: ignore[operator]
+            self._store_command(i, None, cmd)
+        except Exception as exc:  # noqa: BLE001 - reported with the robot's name
+            raise ControllerError(self.robots[i].name, obs.t_s, exc) from exc
+
+    def _store_command(self, i: int, arr: np.ndarray | None, cmd: object) -> None:
+        robot = self.robots[i]
+        is_twist = (
+            (robot.mode == ControlMode.INVERSE)
+            if not isinstance(cmd, Twist | WheelCommand)
+            else isinstance(cmd, Twist)
+        )
+        width = 3 if is_twist else self.cmd_width(i)
+        mode = "inverse" if is_twist else "forward"
+        if arr is None:
+            arr = command_to_array(cmd, width, mode, robot.name, self.state.t_s)
+        arr = arr[:width]
+        if arr.shape != (width,) or not np.all(np.isfinite(arr)):
+            raise ValueError(f"command {arr.tolist()} is not {width} finite numbers ({mode} mode)")
+        self._cmd_is_twist[i] = is_twist
+        if is_twist:
+            self._cmd_twist[i] = arr
+        else:
+            self._cmd_wheels[i, :width] = arr
+
+    def _actuate(self) -> np.ndarray:
+        """Commands -> executed twists (N, 3); fills wheel speeds and steering in the state."""
+        st, dt = self.state, self.dt_s
+        twist = np.zeros((self.n, 3))
+        for g in self._groups:
+            is_tw = self._cmd_is_twist[g.idx]
+            for sel, by_twist in ((is_tw, True), (~is_tw, False)):
+                if not sel.any():
+                    continue
+                idx = g.idx[sel]
+                model = g.model if sel.all() else _subset(g.model, sel)
+                if by_twist:
+                    a = actuation.from_twist(model, self._cmd_twist[idx], st.steering[idx], dt)
+                else:
+                    w = self._cmd_wheels[idx]
+                    steer = w[:, g.n_drive] if model.has_steering else np.zeros(len(idx))
+                    a = actuation.from_wheels(model, w[:, : g.n_drive], steer, st.steering[idx], dt)
+                twist[idx] = a.twist
+                st.wheel_speeds[idx, : g.n_wheels] = a.wheel_speeds
+                st.steering[idx] = a.steering
+                st.steer_angles[idx, : g.n_steer] = a.steer_angles
+        stopped = st.stopped
+        twist[stopped] = 0.0
+        st.wheel_speeds[stopped] = 0.0
+        return twist
+
+    def footprints(self, poses: np.ndarray) -> np.ndarray:
+        """(N, 5) oriented boxes (cx, cy, theta, half_length, half_width) of the bodies."""
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        out = np.empty((len(poses), 5))
+        out[:, 0] = poses[:, 0] + c * self._offset
+        out[:, 1] = poses[:, 1] + s * self._offset
+        out[:, 2] = poses[:, 2]
+        out[:, 3:5] = self._half
+        return out
+
+    def _move(self, twist: np.ndarray) -> None:
+        """Integrate exactly, in sub-steps short enough that no body can jump a wall cell; a
+        body that would overlap a wall, a box or another robot stops at its last free pose."""
+        st, dt = self.state, self.dt_s
+        start = st.poses
+        sweep = (np.hypot(twist[:, 0], twist[:, 1]) + np.abs(twist[:, 2]) * self._radius) * dt
+        n_sub = max(1, int(np.ceil(sweep.max() / self._substep_len)))
+        good = start.copy()
+        active = np.any(twist != 0.0, axis=1)
+        bump = np.zeros(self.n, dtype=bool)
+        static = self.world.boxes
+        for k in range(1, n_sub + 1):
+            if not active.any():
+                break
+            idx = np.flatnonzero(active)
+            cand = integrate_se2(start[idx], twist[idx], dt * k / n_sub)
+            boxes = self.footprints_subset(cand, idx)
+            hit = self.collider.hit_walls(boxes)
+            if len(static):
+                hit |= self.collider.hit_static(boxes, static)
+            ok = idx[~hit]
+            good[ok] = cand[~hit]
+            bump[idx[hit]] = True
+            active[idx[hit]] = False
+        # robots against robots: undo both moves of every overlapping pair until none is left
+        for _ in range(self.n):
+            pairs = self.collider.overlapping_pairs(self.footprints(good))
+            if len(pairs) == 0:
+                break
+            involved = np.unique(pairs)
+            moved = involved[np.any(good[involved] != start[involved], axis=1)]
+            bump[involved] = True
+            if moved.size == 0:
+                break
+            good[moved] = start[moved]
+        st.collisions += bump & ~st.bump
+        st.bump = bump
+        # path length: exact arc length for free motion, the chord for a move cut short
+        chord = np.hypot(good[:, 0] - start[:, 0], good[:, 1] - start[:, 1])
+        st.distance_m += np.where(bump, chord, np.hypot(twist[:, 0], twist[:, 1]) * dt)
+        twist[bump] = 0.0
+        st.wheel_speeds[bump] = 0.0
+        st.poses = good
+        st.twists = twist
+        st.wheel_angles += st.wheel_speeds * dt
+
+    def footprints_subset(self, poses: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        off = self._offset[idx]
+        out = np.empty((len(poses), 5))
+        out[:, 0] = poses[:, 0] + c * off
+        out[:, 1] = poses[:, 1] + s * off
+        out[:, 2] = poses[:, 2]
+        out[:, 3:5] = self._half[idx]
+        return out
+
+    def _dead_reckon(self, twist: np.ndarray) -> None:
+        """Integrate noisy wheel-encoder readings into the odometry pose."""
+        st, rng = self.state, self.rng
+        for g in self._groups:
+            idx = g.idx
+            drive = st.wheel_speeds[idx][:, list(g.model.driven_wheels)]
+            rel, ab, sn = self._odo[idx, 0:1], self._odo[idx, 1:2], self._odo[idx, 2]
+            if np.any(rel > 0):
+                drive = drive * (1.0 + rel * rng.standard_normal(drive.shape))
+            if np.any(ab > 0):
+                drive = drive + ab * rng.standard_normal(drive.shape)
+            steer = st.steering[idx]
+            if g.model.has_steering and np.any(sn > 0):
+                steer = steer + sn * rng.standard_normal(len(idx))
+            odo_twist = g.model.forward(drive, steer)
+            st.odom_poses[idx] = integrate_se2(st.odom_poses[idx], odo_twist, self.dt_s)
+
+    def _sense(self, force: bool = False) -> None:
+        """Cast every sensor that is due now, for all robots, in one kernel call."""
+        st, tab = self.state, self.sensors
+        if tab.count == 0:
+            return
+        due = np.ones(tab.count, dtype=bool) if force else st.t_s >= st.next_scan_s - 1e-9
+        if not due.any():
+            return
+        s = np.flatnonzero(due)
+        owner = tab.owner[s]
+        pose = st.poses[owner]
+        c, sn = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        mx, my = tab.mount[s, 0], tab.mount[s, 1]
+        origins = np.stack([pose[:, 0] + c * mx - sn * my, pose[:, 1] + sn * mx + c * my], -1)
+        angles = (pose[:, 2] + tab.mount[s, 2])[:, None] + tab.rel_angles[s]
+        boxes = self.footprints(st.poses)
+        if len(self.world.boxes):
+            boxes = np.concatenate([boxes, self.world.boxes])
+        exact = self.caster.cast(origins, angles, tab.range_max[s], boxes, owner)
+        st.scans[s] = apply_noise(
+            exact, tab.range_min[s], tab.range_max[s], tab.noise[s], tab.dropout[s], self.rng
+        )
+        st.scan_stamp[s] = st.t_s
+        st.next_scan_s[s] = st.t_s + tab.period_s[s]
+
+    # ------------------------------------------------------------------ observations
+    def scan(self, slot: int) -> LaserScan:
+        tab, st = self.sensors, self.state
+        spec = tab.specs[slot]
+        return LaserScan(
+            float(st.scan_stamp[slot]),
+            spec.angle_min_rad + spec.mount_yaw_rad,
+            spec.angle_increment_rad,
+            spec.range_min_m,
+            spec.range_max_m,
+            st.scans[slot, : spec.num_beams].copy(),
+        )
+
+    def observation(self, i: int) -> Observation:
+        st = self.state
+        robot = self.robots[i]
+        scans = {self.sensors.specs[s].name: self.scan(s) for s in self.sensors.slots_of[i]}
+        w = len(robot.model.wheel_names)
+        return Observation(
+            t_s=st.t_s,
+            name=robot.name,
+            scans=scans,
+            odom_pose=st.odom_poses[i].copy(),
+            wheel_speeds=st.wheel_speeds[i, :w].copy(),
+            bump=bool(st.bump[i]),
+            true_pose=st.poses[i].copy(),
+        )
+
+    def batch_observation(self, idx: np.ndarray) -> BatchObservation:
+        st, tab = self.state, self.sensors
+        ranges = {}
+        for name in tab.common_names(idx):
+            slots = np.array([tab.slot(int(i), name) for i in idx])
+            ranges[name] = st.scans[slots, : tab.specs[slots[0]].num_beams]
+        return BatchObservation(
+            t_s=st.t_s,
+            robots=idx,
+            ranges=ranges,
+            odom_pose=st.odom_poses[idx],
+            bump=st.bump[idx],
+            true_pose=st.poses[idx],
+        )
+
+    def robot_index(self, name: str) -> int:
+        for i, r in enumerate(self.robots):
+            if r.name == name:
+                return i
+        raise KeyError(f"no robot named {name!r}; robots: {[r.name for r in self.robots]}")
+
+
+def _subset(model: object, sel: np.ndarray) -> object:
+    """The stacked model restricted to the robots where ``sel`` is True."""
+    from dataclasses import fields, replace
+
+    vals = {}
+    for f in fields(model):  # type: ignore[arg-type]
+        v = getattr(model, f.name)
+        if isinstance(v, np.ndarray) and v.ndim == 1 and v.shape[0] == sel.shape[0]:
+            vals[f.name] = v[sel]
+    return replace(model, **vals)  # type: ignore[type-var]

@@ -1,0 +1,63 @@
+"""The static description of a simulation: world and robot specs (built once, never stepped)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+from agvsim.kinematics.base import KinematicModel
+from agvsim.sensors.range_sensor import RangeSensorSpec
+from agvsim.world.grid import OccupancyGrid
+
+
+class ControlMode(StrEnum):
+    """What a controller commands: a body twist (inverse kinematics computes the wheels) or the
+    wheels themselves (forward kinematics computes the motion), as the thesis lets users pick."""
+
+    INVERSE = "inverse"
+    FORWARD = "forward"
+
+
+@dataclass(frozen=True)
+class OdometrySpec:
+    """Wheel encoders: measured wheel speed = true * (1 + N(0, rel_std)) + N(0, abs_std);
+    measured steering = true + N(0, steer_std). Dead reckoning integrates the measurements."""
+
+    wheel_noise_rel: float = 0.01
+    wheel_noise_abs_rad_s: float = 0.0
+    steering_noise_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    name: str
+    model: KinematicModel
+    mode: ControlMode = ControlMode.INVERSE
+    body_length_m: float = 0.6
+    body_width_m: float = 0.45
+    body_offset_x_m: float = 0.0  # footprint centre ahead of the reference point P
+    initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x m, y m, theta rad (world)
+    sensors: tuple[RangeSensorSpec, ...] = ()
+    odometry: OdometrySpec = field(default_factory=OdometrySpec)
+    color: str = "#d62728"
+
+    @property
+    def footprint_half_m(self) -> tuple[float, float]:
+        return (self.body_length_m / 2.0, self.body_width_m / 2.0)
+
+    @property
+    def bounding_radius_m(self) -> float:
+        hl, hw = self.footprint_half_m
+        return float(np.hypot(abs(self.body_offset_x_m) + hl, hw))
+
+
+@dataclass(frozen=True)
+class World:
+    grid: OccupancyGrid
+    boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # (K, 5) static boxes
+
+    def __post_init__(self) -> None:
+        b = np.asarray(self.boxes, dtype=np.float64).reshape(-1, 5)
+        object.__setattr__(self, "boxes", b)

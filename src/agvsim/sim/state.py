@@ -1,0 +1,137 @@
+"""The changing state of a simulation (a handful of arrays) and the flat sensor table."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from agvsim.sensors.range_sensor import RangeSensorSpec
+from agvsim.sim.spec import RobotSpec
+
+
+@dataclass
+class SensorTable:
+    """Every sensor of every robot as one flat table of S slots (structure of arrays)."""
+
+    specs: list[RangeSensorSpec]
+    owner: np.ndarray  # (S,) robot index
+    mount: np.ndarray  # (S, 3) x, y, yaw in the robot frame
+    rel_angles: np.ndarray  # (S, B_max) beam angles in the sensor frame, NaN padded
+    range_min: np.ndarray  # (S,)
+    range_max: np.ndarray  # (S,)
+    noise: np.ndarray  # (S,)
+    dropout: np.ndarray  # (S,)
+    period_s: np.ndarray  # (S,)
+    slots_of: list[list[int]]  # robot index -> its slots
+
+    @property
+    def count(self) -> int:
+        return len(self.specs)
+
+    @property
+    def max_beams(self) -> int:
+        return int(self.rel_angles.shape[1])
+
+    @classmethod
+    def build(cls, robots: Sequence[RobotSpec]) -> SensorTable:
+        specs, owner, slots_of = [], [], []
+        for i, r in enumerate(robots):
+            names = [s.name for s in r.sensors]
+            if len(set(names)) != len(names):
+                raise ValueError(f"robot {r.name!r}: sensor names must be unique, got {names}")
+            slots_of.append(list(range(len(specs), len(specs) + len(r.sensors))))
+            specs.extend(r.sensors)
+            owner.extend([i] * len(r.sensors))
+        b_max = max((s.num_beams for s in specs), default=1)
+        rel = np.full((len(specs), b_max), np.nan)
+        for k, s in enumerate(specs):
+            rel[k, : s.num_beams] = s.beam_angles_rad
+
+        def col(attr: str) -> np.ndarray:
+            return np.array([getattr(s, attr) for s in specs], dtype=np.float64)
+
+        return cls(
+            specs=specs,
+            owner=np.array(owner, dtype=np.int64),
+            mount=np.array(
+                [(*s.mount_xy_m, s.mount_yaw_rad) for s in specs], dtype=np.float64
+            ).reshape(-1, 3),
+            rel_angles=rel,
+            range_min=col("range_min_m"),
+            range_max=col("range_max_m"),
+            noise=col("noise_std_m"),
+            dropout=col("dropout_prob"),
+            period_s=1.0 / col("rate_hz") if specs else np.zeros(0),
+            slots_of=slots_of,
+        )
+
+    def slot(self, robot: int, name: str) -> int:
+        for s in self.slots_of[robot]:
+            if self.specs[s].name == name:
+                return s
+        raise KeyError(name)
+
+    def common_names(self, robots: np.ndarray) -> list[str]:
+        """Sensor names every robot of ``robots`` has, with the same beam count."""
+        first = [self.specs[s] for s in self.slots_of[int(robots[0])]]
+        out = []
+        for spec in first:
+            ok = True
+            for i in robots[1:]:
+                try:
+                    other = self.specs[self.slot(int(i), spec.name)]
+                except KeyError:
+                    ok = False
+                    break
+                ok = other.num_beams == spec.num_beams
+                if not ok:
+                    break
+            if ok:
+                out.append(spec.name)
+        return out
+
+
+@dataclass
+class SimState:
+    t_s: float
+    step: int
+    poses: np.ndarray  # (N, 3) x, y, theta: ground truth, world frame
+    twists: np.ndarray  # (N, 3) vx, vy, omega executed in the last step, robot frame
+    wheel_speeds: np.ndarray  # (N, W_max) rad/s, model wheel order, zero padded
+    wheel_angles: np.ndarray  # (N, W_max) rad, accumulated rotation of each wheel
+    steering: np.ndarray  # (N,) rad, bicycle steering angle (car-like models)
+    steer_angles: np.ndarray  # (N, S_max) rad, each steered wheel
+    odom_poses: np.ndarray  # (N, 3) dead-reckoned from wheel encoders
+    bump: np.ndarray  # (N,) bool: collided in the last step
+    collisions: np.ndarray  # (N,) int: collision events (a bump after a free step)
+    distance_m: np.ndarray  # (N,) travelled
+    stopped: np.ndarray  # (N,) bool: taken out of the run (e.g. its controller failed)
+    scans: np.ndarray  # (S, B_max) latest readings per sensor slot
+    scan_stamp: np.ndarray  # (S,) time of the latest reading
+    next_scan_s: np.ndarray  # (S,) when each sensor fires next
+
+    @classmethod
+    def zeros(
+        cls, n: int, sensors: SensorTable, w_max: int, s_max: int, poses: np.ndarray
+    ) -> SimState:
+        s, b = sensors.count, sensors.max_beams
+        return cls(
+            t_s=0.0,
+            step=0,
+            poses=poses.copy(),
+            twists=np.zeros((n, 3)),
+            wheel_speeds=np.zeros((n, w_max)),
+            wheel_angles=np.zeros((n, w_max)),
+            steering=np.zeros(n),
+            steer_angles=np.zeros((n, s_max)),
+            odom_poses=poses.copy(),
+            bump=np.zeros(n, dtype=bool),
+            collisions=np.zeros(n, dtype=np.int64),
+            distance_m=np.zeros(n),
+            stopped=np.zeros(n, dtype=bool),
+            scans=np.full((s, b), np.inf),
+            scan_stamp=np.zeros(s),
+            next_scan_s=np.zeros(s),
+        )

@@ -1,0 +1,1 @@
+"""Plots and viewers (they observe a simulation; the core never imports them)."""

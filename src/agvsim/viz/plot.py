@@ -1,0 +1,80 @@
+"""``plot.png``: the map, every robot's trajectory, its final footprint and its last scan."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = "") -> None:
+    """Draw the run. ``trajectories`` maps robot name -> (T, 2) xy samples."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Polygon
+
+    grid = sim.world.grid
+    xmin, xmax, ymin, ymax = grid.extent_m
+    aspect = (ymax - ymin) / max(xmax - xmin, 1e-9)
+    fig, ax = plt.subplots(figsize=(8, max(3.0, min(12.0, 8 * aspect)) + 0.6), dpi=110)
+    ax.imshow(
+        grid.occupied,
+        cmap="Greys",
+        vmin=0,
+        vmax=1.4,
+        origin="upper",
+        extent=(xmin, xmax, ymin, ymax),
+        interpolation="nearest",
+    )
+    for b in sim.world.boxes:
+        ax.add_patch(Polygon(_corners(b), closed=True, color="0.35"))
+    st = sim.state
+    fps = sim.footprints(st.poses)
+    for i, robot in enumerate(sim.robots):
+        xy = trajectories.get(robot.name)
+        if xy is not None and len(xy):
+            ax.plot(xy[:, 0], xy[:, 1], "-", color=robot.color, lw=1.2, label=robot.name)
+            ax.plot(xy[0, 0], xy[0, 1], "o", color=robot.color, ms=4)
+        ax.add_patch(Polygon(_corners(fps[i]), closed=True, fc=robot.color, ec="k", lw=0.6))
+        p = st.poses[i]
+        ax.arrow(p[0], p[1], 0.4 * np.cos(p[2]), 0.4 * np.sin(p[2]), width=0.03, color="k")
+        slots = sim.sensors.slots_of[i]
+        if slots:  # the sensor with most beams: its last scan as points
+            s = max(slots, key=lambda k: sim.sensors.specs[k].num_beams)
+            scan = sim.scan(s)
+            spec = sim.sensors.specs[s]
+            r = scan.ranges
+            ok = np.isfinite(r)
+            a = p[2] + scan.angle_min_rad + scan.angle_increment_rad * np.arange(len(r))
+            mx, my = spec.mount_xy_m
+            ox = p[0] + np.cos(p[2]) * mx - np.sin(p[2]) * my
+            oy = p[1] + np.sin(p[2]) * mx + np.cos(p[2]) * my
+            ax.plot(
+                ox + r[ok] * np.cos(a[ok]),
+                oy + r[ok] * np.sin(a[ok]),
+                ".",
+                color="tab:blue" if spec.num_beams > 4 else "tab:green",
+                ms=2.5,
+            )
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (east)")
+    ax.set_ylabel("y [m] (north)")
+    ax.set_title(title or f"t = {st.t_s:.1f} s")
+    if sim.robots:
+        ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _corners(box: np.ndarray) -> np.ndarray:
+    cx, cy, th, hl, hw = box
+    c, s = np.cos(th), np.sin(th)
+    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+    return np.column_stack(
+        [cx + c * local[:, 0] - s * local[:, 1], cy + s * local[:, 0] + c * local[:, 1]]
+    )
