@@ -138,49 +138,30 @@ CASES = [
     ("not_a_mapping.yaml", r"not_a_mapping\.yaml", ["must hold a mapping of keys", "got list"]),
 ]
 
-# Faults the code under test does not yet report well; strict, so a fix shows up as XPASS.
+# Faults that were once reported badly (kept apart as regression cases).
 KNOWN_BUGS = [
     pytest.param(
         "lidar_key_typo.yaml",
         r"robots\[0\]\.sensors\[0\](\.lidar)?\.beam\b",
         ["did you mean 'beams'?", "fov_deg"],
-        marks=pytest.mark.xfail(
-            strict=True,
-            reason="scenario._fields_at resolves a union to its "
-            "first member: a lidar typo is checked against the rangers' keys",
-        ),
         id="lidar_key_typo.yaml",
     ),
     pytest.param(
         "avoid_key_typo.yaml",
         r"robots\[0\]\.controller(\.avoid)?\.trigger\b",
         ["did you mean 'trigger_m'?"],
-        marks=pytest.mark.xfail(
-            strict=True,
-            reason="scenario._fields_at: an avoid typo is "
-            "checked against the script controller's keys",
-        ),
         id="avoid_key_typo.yaml",
     ),
     pytest.param(
         "range_min_above_max.yaml",
         R0 + r"\.sensors\b",
         ["range_min_m", "range_max_m"],
-        marks=pytest.mark.xfail(
-            strict=True,
-            reason="scenario._sensor lets RangeSensorSpec's "
-            "ValueError escape instead of a ScenarioError",
-        ),
         id="range_min_above_max.yaml",
     ),
     pytest.param(
         "python_controller_not_python.yaml",
         R0 + r"\.controller\.file\b",
         ["helper_controller.txt"],
-        marks=pytest.mark.xfail(
-            strict=True,
-            reason="scenario._load_python: a non-.py file gives spec None and an AttributeError",
-        ),
         id="python_controller_not_python.yaml",
     ),
 ]
@@ -231,11 +212,6 @@ def test_schema_errors_are_reported_together():
     assert str(info.value).startswith("inline is not a valid scenario:")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="scenario.build raises ScenarioError('', ...): the file "
-    "is not named (the CLI and runner add it, the Python API does not)",
-)
 def test_build_errors_name_the_file():
     assert "robot_inside_wall.yaml" in str(_refusal(BAD / "robot_inside_wall.yaml"))
 
@@ -285,11 +261,6 @@ def test_cli_validate_accepts_a_shipped_scenario(tmp_path):
     assert out.endswith("valid")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="cli prints ScenarioError with Rich markup on, so "
-    "'[vx, omega]' in the message is taken for a style tag and vanishes",
-)
 def test_cli_keeps_brackets_in_messages(tmp_path):
     rc, _, err = _cli("validate", str(BAD / "script_twist_wrong_length.yaml"), cwd=tmp_path)
     assert rc == 2
@@ -424,30 +395,17 @@ def _one_robot(**robot) -> dict:
     }
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="scenario.robot_spec wraps theta with arctan2(sin, cos), "
-    "which gives -pi for -180 deg; the convention is (-pi, pi]",
-)
 def test_heading_minus_180_deg_wraps_to_pi():
     sim = build(parse_scenario(_one_robot(pose={"x_m": -8.0, "y_m": 5.0, "theta_deg": -180})))
     assert sim.state.poses[0, 2] == np.pi
 
 
-@pytest.mark.xfail(
-    strict=True, reason="scenario.build_grid ignores world.origin_xy_m for a random maze"
-)
 def test_random_maze_honours_origin():
     data = _one_robot(pose={"x_m": 2.0, "y_m": 2.0}, body={"length_m": 0.5, "width_m": 0.4})
     data["world"] = {"random": {"rows": 2, "cols": 2, "seed": 3}, "origin_xy_m": [0.0, 0.0]}
     assert build(parse_scenario(data)).world.grid.origin_xy_m == (0.0, 0.0)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="scenario.build_grid always passes cell_size_m (default "
-    "1.0) to loaders.load_map, which refuses a resolution for a ROS map",
-)
 def test_ros_map_file_loads(tmp_path):
     from agvsim.world import loaders
 
@@ -461,11 +419,6 @@ def test_ros_map_file_loads(tmp_path):
     assert sim.world.grid.resolution_m == 0.5
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="RobotConfig.params accepts a quoted number as a str; "
-    "validation passes, then the first step fails with a numpy TypeError",
-)
 def test_quoted_number_param_is_refused_or_converted():
     data = _one_robot(
         params={"wheel_radius_m": "0.1"},
@@ -478,11 +431,6 @@ def test_quoted_number_param_is_refused_or_converted():
     sim.step()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="scenario._load_python lets a SyntaxError in the user's "
-    "controller file escape instead of a ScenarioError",
-)
 def test_python_controller_with_syntax_error_is_refused(tmp_path):
     (tmp_path / "broken.py").write_text("def controller(obs)\n    return (0, 0, 0)\n")
     data = _one_robot(controller={"type": "python", "file": "broken.py"})

@@ -18,8 +18,14 @@ app = typer.Typer(
     no_args_is_help=True,
     help="agvsim: a fast simulator of AGVs (wheeled mobile robots).",
 )
-err = Console(stderr=True)
-out = Console()
+err = Console(stderr=True, soft_wrap=True)
+out = Console(soft_wrap=True)
+
+
+def _fail(label: str, message: object, style: str = "red") -> None:
+    """Print a user-facing error: the label styled, the message verbatim (no markup)."""
+    err.print(f"{label}:", style=style, end=" ")
+    err.print(str(message), markup=False, highlight=False)
 
 
 def _version(value: bool) -> None:
@@ -73,13 +79,13 @@ def run(
         with progress:
             data = run_scenario(scenario, out_dir, duration, seed, record_every, not no_plot, tick)
     except ScenarioError as e:
-        err.print(f"[red]error:[/red] {e}", highlight=False, markup=True)
+        _fail("error", e)
         raise typer.Exit(2) from None
     except ControllerError as e:
-        err.print(f"[red]controller error:[/red] {e}\noutputs so far written to {out_dir}")
+        _fail("controller error", f"{e}\noutputs so far written to {out_dir}")
         raise typer.Exit(1) from None
     except KeyboardInterrupt:
-        err.print(f"[yellow]interrupted[/yellow]: outputs so far written to {out_dir}")
+        _fail("interrupted", f"outputs so far written to {out_dir}", "yellow")
         raise typer.Exit(130) from None
     r = data["run"]
     out.print(
@@ -106,9 +112,7 @@ def validate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file."
     try:
         build(load_scenario(scenario))
     except ScenarioError as e:
-        if not e.source:
-            e = ScenarioError(str(scenario), e.problems)
-        err.print(f"[red]error:[/red] {e}", highlight=False)
+        _fail("error", e)
         raise typer.Exit(2) from None
     out.print(f"{scenario}: valid")
 

@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 from agvsim.control.adapters import WheelsFromTwist
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
-from agvsim.kinematics import MODELS, stack_models
+from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
@@ -178,7 +178,9 @@ class RobotConfig(_Strict):
     name: str = Field(min_length=1)
     model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
     mode: ControlMode = ControlMode.INVERSE
-    params: dict[str, float | str] = {}
+    params: dict[str, float | str] = Field(
+        {}, description="model parameters, see `agvsim models`"
+    )
     body: Body = Body()
     pose: Pose = Pose()
     color: str = "#d62728"
@@ -196,6 +198,7 @@ class Scenario(_Strict):
     world: WorldConfig
     robots: list[RobotConfig] = Field(min_length=1)
     _base_dir: Path = PrivateAttr(default=Path("."))
+    _source: str = PrivateAttr(default="scenario")
 
     @model_validator(mode="after")
     def _unique_names(self) -> Scenario:
@@ -217,53 +220,45 @@ def _loc(loc: tuple) -> str:
     return out or "(top level)"
 
 
+def _models_in(ann: Any) -> list[type[BaseModel]]:
+    """Every schema class an annotation can hold (through list, Optional, Union, Annotated)."""
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return [ann]
+    out: list[type[BaseModel]] = []
+    for arg in getattr(ann, "__args__", ()) or ():
+        out += _models_in(arg)
+    origin = getattr(ann, "__origin__", None)
+    if origin is not None and not out:
+        out += _models_in(origin)
+    return out
+
+
+def _tag_of(model: type[BaseModel]) -> str | None:
+    f = model.model_fields.get("type")
+    args = getattr(f.annotation, "__args__", ()) if f is not None else ()
+    return str(args[0]) if args else None
+
+
 def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
-    """Field names of the schema object that ``loc`` (without its last key) points into."""
-    cls: Any = model
+    """Field names of the schema object that ``loc`` (without its last key) points into;
+    pydantic puts a discriminated union's tag (e.g. 'lidar') into the location."""
+    cands: list[type[BaseModel]] = [model]
     for part in loc[:-1]:
         if isinstance(part, int):
             continue
-        if isinstance(cls, type) and issubclass(cls, BaseModel):
-            if part in cls.model_fields:
-                cls = _inner_model(cls.model_fields[part].annotation)
-            else:  # discriminated union tag, e.g. "rangers"
-                cls = next(
-                    (
-                        m
-                        for m in _union_members(cls)
-                        if "type" in m.model_fields
-                        and part in str(m.model_fields["type"].annotation)
-                    ),
-                    cls,
-                )
-    if isinstance(cls, type) and issubclass(cls, BaseModel):
-        return list(cls.model_fields)
+        tagged = [m for m in cands if _tag_of(m) == part]
+        if tagged:
+            cands = tagged
+            continue
+        nxt: list[type[BaseModel]] = []
+        for m in cands:
+            if part in m.model_fields:
+                nxt += _models_in(m.model_fields[part].annotation)
+        cands = nxt or cands
     names: list[str] = []
-    for m in _union_members(cls):
-        names += list(m.model_fields)
+    for m in cands:
+        names += [n for n in m.model_fields if n not in names]
     return names
-
-
-def _inner_model(ann: Any) -> Any:
-    for arg in getattr(ann, "__args__", ()) or ():
-        inner = _inner_model(arg)
-        if inner is not None:
-            return inner
-    if getattr(ann, "__metadata__", None):
-        return ann
-    if isinstance(ann, type) and issubclass(ann, BaseModel):
-        return ann
-    return ann if getattr(ann, "__origin__", None) is not None else None
-
-
-def _union_members(ann: Any) -> list[type[BaseModel]]:
-    out: list[type[BaseModel]] = []
-    for arg in getattr(ann, "__args__", ()) or ():
-        if isinstance(arg, type) and issubclass(arg, BaseModel):
-            out.append(arg)
-        else:
-            out += _union_members(arg)
-    return out
 
 
 def _did_you_mean(word: str, options: list[str]) -> str:
@@ -326,6 +321,7 @@ def load_scenario(path: str | Path) -> Scenario:
         ) from None
     scenario = parse_scenario(data, str(path))
     scenario._base_dir = path.parent
+    scenario._source = str(path)
     return scenario
 
 
@@ -333,30 +329,31 @@ def load_scenario(path: str | Path) -> Scenario:
 def build_grid(cfg: WorldConfig, base_dir: Path) -> OccupancyGrid:
     res, origin = cfg.cell_size_m, cfg.origin_xy_m
     if cfg.maze:
-        return (
-            mazes.thesis_maze(cfg.maze, resolution_m=res)
-            if origin is None
-            else OccupancyGrid(mazes.thesis_maze(cfg.maze).occupied, res, origin)
-        )
-    if cfg.matrix is not None:
+        grid = mazes.thesis_maze(cfg.maze, resolution_m=res)
+    elif cfg.matrix is not None:
         return loaders.grid_from_matrix(cfg.matrix, res, origin, source="world.matrix")
-    if cfg.picture is not None:
+    elif cfg.picture is not None:
         return loaders.parse_text_picture(cfg.picture, res, origin, source="world.picture")
-    if cfg.random is not None:
+    elif cfg.random is not None:
         r = cfg.random
-        return mazes.random_maze(
-            r.rows,
-            r.cols,
-            r.seed,
-            corridor_cells=r.corridor_cells,
-            wall_cells=r.wall_cells,
-            resolution_m=res,
-            loop_fraction=r.loop_fraction,
+        grid = mazes.random_maze(
+            r.rows, r.cols, r.seed, corridor_cells=r.corridor_cells, wall_cells=r.wall_cells,
+            resolution_m=res, loop_fraction=r.loop_fraction,
         )
-    path = Path(cfg.file or "")
-    if not path.is_absolute():
-        path = base_dir / path
-    return loaders.load_map(path, resolution_m=res, origin_xy_m=origin)
+    else:
+        path = Path(cfg.file or "")
+        if not path.is_absolute():
+            path = base_dir / path
+        # a ROS map carries its own resolution and origin: pass only what the user wrote
+        given = cfg.model_fields_set
+        return loaders.load_map(
+            path,
+            resolution_m=res if "cell_size_m" in given else None,
+            origin_xy_m=origin if "origin_xy_m" in given else None,
+        )
+    if origin is not None:
+        grid = OccupancyGrid(grid.occupied, grid.resolution_m, origin)
+    return grid
 
 
 def _model(rc: RobotConfig, where: str) -> Any:
@@ -372,6 +369,12 @@ def _model(rc: RobotConfig, where: str) -> Any:
                     f"{rc.model!r}" + _did_you_mean(k, allowed)
                 ],
             )
+        default = next(f.default for f in dc_fields(cls) if f.name == k)
+        numeric = isinstance(default, int | float | np.floating)
+        if numeric and (isinstance(v, str | bool) or not isinstance(v, int | float)):
+            raise ScenarioError("", [f"{where}.params.{k}: must be a number, got {v!r}"])
+        if not numeric and not isinstance(v, str):
+            raise ScenarioError("", [f"{where}.params.{k}: must be text, got {v!r}"])
         kwargs[k] = v
     try:
         return cls(**kwargs)
@@ -405,14 +408,26 @@ def _sensor(
 
 
 def robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
+    try:
+        return _robot_spec(rc, where, dt_s)
+    except ScenarioError:
+        raise
+    except ValueError as err:
+        raise ScenarioError("", [f"{where}: {err}"]) from None
+
+
+def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
     model = _model(rc, where)
     # car-like bodies sit ahead of the rear axle; others are centred on P
     offset = rc.body.offset_x_m
     if offset is None:
         offset = float(getattr(model, "wheelbase_m", 0.0)) / 2.0
-    sensors = tuple(
-        _sensor(s, offset, 10.0 if s.type == "lidar" else 1.0 / dt_s) for s in rc.sensors
-    )
+    sensors = []
+    for k, sc in enumerate(rc.sensors):
+        try:
+            sensors.append(_sensor(sc, offset, 10.0 if sc.type == "lidar" else 1.0 / dt_s))
+        except ValueError as err:
+            raise ScenarioError("", [f"{where}.sensors[{k}]: {err}"]) from None
     names = [s.name for s in sensors]
     if len(set(names)) != len(names):
         raise ScenarioError(
@@ -426,8 +441,8 @@ def robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
         body_length_m=rc.body.length_m,
         body_width_m=rc.body.width_m,
         body_offset_x_m=offset,
-        initial_pose=(rc.pose.x_m, rc.pose.y_m, float(np.arctan2(np.sin(th), np.cos(th)))),
-        sensors=sensors,
+        initial_pose=(rc.pose.x_m, rc.pose.y_m, float(wrap_angle(th))),
+        sensors=tuple(sensors),
         odometry=OdometrySpec(
             rc.odometry.wheel_noise_rel,
             rc.odometry.wheel_noise_abs_rad_s,
@@ -443,9 +458,20 @@ def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any
         path = base_dir / path
     if not path.is_file():
         raise ScenarioError("", [f"{where}.controller.file: no such file {str(path)!r}"])
+    if path.suffix != ".py":
+        raise ScenarioError(
+            "", [f"{where}.controller.file: {path.name!r} must be a Python file ending in .py"]
+        )
     spec = importlib.util.spec_from_file_location(f"agvsim_user_{path.stem}", path)
     module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    try:
+        spec.loader.exec_module(module)  # type: ignore[union-attr]
+    except Exception as err:  # noqa: BLE001 - the user's file: report, don't crash
+        line = f" (line {err.lineno})" if isinstance(err, SyntaxError) and err.lineno else ""
+        raise ScenarioError(
+            "", [f"{where}.controller.file: {path.name} could not be loaded{line}: "
+                 f"{type(err).__name__}: {err}"]
+        ) from None
     obj = getattr(module, cfg.name, None)
     if obj is None:
         found = [n for n in vars(module) if not n.startswith("_")]
@@ -549,6 +575,13 @@ def _cone_beams(sensor: RangeSensorSpec, half_deg: float = 15.0) -> tuple[tuple,
 
 def build(sc: Scenario, seed: int | None = None, base_dir: Path | None = None) -> Simulation:
     """A ready ``Simulation`` from a validated scenario; refuses robots inside walls."""
+    try:
+        return _build(sc, seed, base_dir)
+    except ScenarioError as err:
+        raise ScenarioError(err.source or sc._source, err.problems) from None
+
+
+def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     base = base_dir or sc._base_dir
     try:
         grid = build_grid(sc.world, base)

@@ -102,9 +102,13 @@ def command_to_array(cmd: object, width: int, mode: str, name: str, t_s: float) 
         except (TypeError, ValueError):
             values = None
     if values is None or len(values) != width:
-        what = "a Twist or (vx, vy, omega)" if mode == "inverse" else (
-            f"a WheelCommand or {width} numbers (driven wheel speeds rad/s"
-            + (", then steering rad)" if width else ")")
+        what = (
+            "a Twist or (vx, vy, omega)"
+            if mode == "inverse"
+            else (
+                f"a WheelCommand or {width} numbers (driven wheel speeds rad/s"
+                + (", then steering rad)" if width else ")")
+            )
         )
         raise ValueError(
             f"controller of robot {name!r} at t={t_s:.3f} s returned {cmd!r}; "

@@ -43,8 +43,8 @@ JUMP = 3  # codes >= JUMP: free cells in the middle of empty space
 _JUMP_MIN = 3  # smallest free radius (cells) worth a jump instead of DDA steps
 _UNIFORM_TOL = 1e-12  # rad: beams this close to an even spacing are treated as evenly spaced
 _SNAP = 1e-15  # direction components below this are exactly 0 (axis-parallel beams)
-_TABLE = 16
-_CORNER_TOL = 1e-12  # relative to the map's size: beams this close to a cell corner touch it  # beams per exact cos/sin anchor for evenly spaced beams
+_TABLE = 16  # beams per exact cos/sin anchor for evenly spaced beams
+_CORNER_TOL = 1e-12  # relative to the map's size: beams this close to a cell corner touch it
 _TWO_PI = 2.0 * math.pi
 
 
@@ -209,39 +209,28 @@ def corner_eps(nx, ny, res, ox, oy, x0, y0):
 
 
 @njit(cache=True, error_model="numpy")
-def _jump(cells, w, v, idx, res, ox, oy, x0, y0, c, s, ic, is_, eps):
-    """Leave the free square of radius ``v - JUMP + _JUMP_MIN`` cells around cell ``idx``: returns
-    the time the beam leaves it, the cell just inside its exit face and the next face times.
-    The cell across the beam's direction is taken a touch before the exit point (never ahead of
-    the beam), so the DDA resumes behind or on the beam and catches up inside the square."""
+def _jump(v, idx, sx, sy, tmx, tmy, tdx, tdy, ax, ay, eps):
+    """Skip the free square of radius ``r = v - JUMP + _JUMP_MIN`` cells around cell ``idx``: the
+    beam leaves it at ``t = min(tmx + r tdx, tmy + r tdy)``; count the x and y faces it crosses
+    before ``t - eps`` (at most r each) and advance the DDA state by them. Counting a touch
+    before the exit keeps the state on or behind the beam, never ahead of it, so the DDA that
+    resumes catches up inside the square (all free) and misses nothing."""
     r = v - JUMP + _JUMP_MIN
-    row = int((idx + 0.5) * (1.0 / w)) - 1  # exact for any realistic grid (w < 2**40)
-    col = idx - (row + 1) * w - 1
-    tx = (ox + (col + r + 1 if c > 0.0 else col - r) * res - x0) * ic
-    ty = (oy + (row + r + 1 if s > 0.0 else row - r) * res - y0) * is_
-    if tx <= ty:
-        t = tx
-        col += r if c > 0.0 else -r
-        g = int(math.floor((y0 + t * s - math.copysign(eps, s) - oy) / res))
-        row = min(max(g, row - r), row + r)
-    else:
-        t = ty
-        row += r if s > 0.0 else -r
-        g = int(math.floor((x0 + t * c - math.copysign(eps, c) - ox) / res))
-        col = min(max(g, col - r), col + r)
-    tmx = (ox + (col + 1 if c > 0.0 else col) * res - x0) * ic
-    tmy = (oy + (row + 1 if s > 0.0 else row) * res - y0) * is_
-    return t, (row + 1) * w + col + 1, tmx, tmy
+    t = min(tmx + r * tdx, tmy + r * tdy)
+    kx = min(max(math.floor((t - eps - tmx) * ax) + 1, 0), r)  # ax = 1 / tdx
+    ky = min(max(math.floor((t - eps - tmy) * ay) + 1, 0), r)
+    return t, idx + kx * sx + ky * sy, tmx + kx * tdx, tmy + ky * tdy
 
 
-@njit(cache=True, error_model="numpy")
-def grid_ray(cells, nx, ny, res, ox, oy, x0, y0, ix, onx, iy, ony, inside, eps, c, s, ic, is_,
-             tlim):
+@njit(cache=True, error_model="numpy", inline="always")
+def grid_ray(cells, nx, ny, res, ox, oy, inv_res, inv_w, x0, y0, ix, onx, iy, ony, inside, eps,
+             c, s, ic, is_, tlim):
     """Distance along the unit direction ``(c, s)`` (``ic = 1 / c``, ``is_ = 1 / s``) from
     ``(x0, y0)`` to the first occupied cell of the padded grid ``cells`` (see :func:`pad_grid`),
     or inf if none within ``tlim``.
 
-    ``ix, onx, iy, ony`` come from :func:`_cell_of` for the origin; ``inside`` says the origin is in
+    ``inv_res = 1 / res``, ``inv_w = 1 / (nx + 2)``; ``ix, onx, iy, ony`` come from
+    :func:`_cell_of` for the origin; ``inside`` says the origin is in
     the closed map rectangle, in which case the caller has checked it touches no occupied cell.
     Beams passing within ``eps`` (see :func:`corner_eps`) of a cell corner touch it.
     """
@@ -288,11 +277,12 @@ def grid_ray(cells, nx, ny, res, ox, oy, x0, y0, ix, onx, iy, ony, inside, eps, 
     tmx = (ox + (cx + 1 if c > 0.0 else cx) * res - x0) * ic
     tmy = (oy + (cy + 1 if s > 0.0 else cy) * res - y0) * is_
     tdx, tdy = res * abs(ic), res * abs(is_)
+    ax, ay = abs(c) * inv_res, abs(s) * inv_res
     tl = tlim + 1e-9 * (1.0 + tlim)
     idx = (cy + 1) * w + cx + 1
     v = cells[idx] if inside else 0
     if v >= JUMP:
-        t, idx, tmx, tmy = _jump(cells, w, v, idx, res, ox, oy, x0, y0, c, s, ic, is_, eps)
+        t, idx, tmx, tmy = _jump(v, idx, sx, sy, tmx, tmy, tdx, tdy, ax, ay, eps)
         if t > tl:
             return np.inf
     while True:
@@ -322,11 +312,11 @@ def grid_ray(cells, nx, ny, res, ox, oy, x0, y0, ix, onx, iy, ony, inside, eps, 
                 break
             if v == OUTSIDE:
                 return np.inf
-            t, idx, tmx, tmy = _jump(cells, w, v, idx, res, ox, oy, x0, y0, c, s, ic, is_, eps)
+            t, idx, tmx, tmy = _jump(v, idx, sx, sy, tmx, tmy, tdx, tdy, ax, ay, eps)
             if t > tl:
                 return np.inf
     # entry distance of the hit cell (its later entry face), correctly rounded
-    row = int((idx + 0.5) * (1.0 / w)) - 1
+    row = int((idx + 0.5) * inv_w) - 1
     col = idx - (row + 1) * w - 1
     t = max((ox + (col if c > 0.0 else col + 1) * res - x0) / c,
             (oy + (row if s > 0.0 else row + 1) * res - y0) / s)
@@ -472,6 +462,7 @@ def cast_rays_padded(cells, nx, ny, res, ox, oy, origins, beam_angles, max_range
     Shapes and conventions as :func:`cast_rays`; parallel over sensors."""
     n_sensors, n_beams = beam_angles.shape
     w = nx + 2
+    inv_res, inv_w = 1.0 / res, 1.0 / w
     for si in prange(n_sensors):
         x0, y0, r_max = origins[si, 0], origins[si, 1], max_range[si]
         row = out[si]
@@ -494,8 +485,8 @@ def cast_rays_padded(cells, nx, ny, res, ox, oy, origins, beam_angles, max_range
                          ignore_box[si], boxes, btab, start, items, geom)
         for k in range(n):
             tlim = min(r_max, row[k])
-            t = grid_ray(cells, nx, ny, res, ox, oy, x0, y0, ix, onx, iy, ony, inside, eps,
-                         dirs[k, 0], dirs[k, 1], dirs[k, 2], dirs[k, 3], tlim)
+            t = grid_ray(cells, nx, ny, res, ox, oy, inv_res, inv_w, x0, y0, ix, onx, iy, ony,
+                         inside, eps, dirs[k, 0], dirs[k, 1], dirs[k, 2], dirs[k, 3], tlim)
             if t < row[k]:
                 row[k] = t
 
@@ -569,9 +560,8 @@ class RayCaster:
         org = _as_f64("origins", origins, (2,))
         ang = np.ascontiguousarray(beam_angles, dtype=np.float64)
         if ang.ndim != 2 or ang.shape[0] != org.shape[0]:
-            raise ValueError(
-                f"beam_angles must have shape (S, B) with S = {org.shape[0]} sensors, got {ang.shape}"
-            )
+            raise ValueError(f"beam_angles must have shape (S, B) with S = {org.shape[0]} "
+                             f"sensors, got {ang.shape}")
         if not np.all(np.isfinite(org)):
             raise ValueError("origins must be finite")
         if np.any(np.isinf(ang)):

@@ -1,0 +1,63 @@
+"""The README's two commands: CI runs the test command; the main job's run works as written."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _commands() -> list[str]:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.split("## Two commands", 1)[1].split("\n## ", 1)[0]
+    return [b.strip() for b in re.findall(r"```bash\n(.*?)```", section, re.S)]
+
+
+def test_readme_has_exactly_two_commands_and_ci_runs_the_test_one():
+    cmds = _commands()
+    assert len(cmds) == 2 and all("\n" not in c for c in cmds)
+    main, tests = cmds
+    assert "agvsim run" in main and "pytest" in tests
+    assert tests in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+
+
+def test_readme_main_command_runs_and_writes_its_outputs(tmp_path):
+    main = _commands()[0]
+    run = shlex.split(main.split("&&")[-1])
+    assert run[0].endswith("agvsim") and run[1] == "run"
+    args = run[2:]
+    out = tmp_path / "out"
+    args[args.index("--out") + 1] = str(out)
+    res = subprocess.run(
+        [sys.executable, "-m", "agvsim.cli", "run", *args, "--duration", "4", "--quiet"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["run"]["simulated_time_s"] == 4.0
+    assert summary["run"]["status"] == "completed"
+    assert len(summary["robots"]) == 4
+    with (out / "trajectory.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert rows[0].keys() >= {"t", "robot", "x", "y", "theta", "vx", "vy", "omega", "wheel1_rad_s"}
+    assert len(rows) == 4 * (200 + 1)  # 4 robots x (t = 0 and 200 steps of 0.02 s)
+    png = (out / "plot.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+
+
+def test_help_lists_every_command():
+    res = subprocess.run(
+        [sys.executable, "-m", "agvsim.cli", "--help"], capture_output=True, text=True, timeout=120
+    )
+    assert res.returncode == 0
+    for cmd in ("run", "validate", "bench", "models"):
+        assert cmd in res.stdout
