@@ -1,8 +1,8 @@
 """Benchmarks behind ``agvsim bench`` (the scripts in ``benchmarks/`` call these too).
 
-Workload (issue #2): the thesis App. C.1 maze, differential robots carrying the thesis's four
-rangers (50 Hz) and a 240-beam 10 m lidar at 10 Hz, kinematics at 50 Hz, the thesis's
-obstacle avoidance, robots visible to each other's lidars, collision checks on. For 100 and
+Workload (issue #2): the thesis App. C.1 maze, differential robots carrying the thesis's
+240-beam 10 m lidar at 10 Hz, kinematics at 50 Hz, the thesis's obstacle avoidance reading the
+lidar's front beams, robots visible to each other's lidars, collision checks on. For 100 and
 1000 robots the maze is tiled (ceil(sqrt(N / 10)) copies a side) so every copy holds about
 ten robots, as crowded as the one-maze case can sensibly be. Figures are printed, never
 asserted: compare ratios within one run.
@@ -23,6 +23,7 @@ import numpy as np
 
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.kinematics import DifferentialDrive
+from agvsim.scenario import cone_beams
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sensors.raycast import RayCaster
 from agvsim.sim.engine import Binding, Simulation
@@ -55,10 +56,8 @@ def fleet(n: int, seed: int = 0) -> Simulation:
     rng = np.random.default_rng(seed)
     poses = free_starts(grid, n, rng)
     model = DifferentialDrive(wheel_radius_m=0.1, half_track_m=0.25)
-    sensors = (
-        RangeSensorSpec.thesis_rangers(1.5, rate_hz=50.0),
-        RangeSensorSpec.thesis_lidar(rate_hz=10.0),
-    )
+    lidar = RangeSensorSpec.thesis_lidar(rate_hz=10.0)
+    sensors = (lidar,)
     robots = [
         RobotSpec(
             f"r{i}",
@@ -71,7 +70,8 @@ def fleet(n: int, seed: int = 0) -> Simulation:
         )
         for i, p in enumerate(poses)
     ]
-    ctrl = ObstacleAvoidance(trigger_m=0.8, speed_m_s=0.5)
+    front, back = cone_beams(lidar)
+    ctrl = ObstacleAvoidance("lidar", front, back, trigger_m=0.8, speed_m_s=0.5)
     return Simulation(World(grid), robots, [Binding(ctrl, tuple(range(n)), batch=True)], seed=seed)
 
 
@@ -96,15 +96,12 @@ def steps_per_second(n: int, steps: int, warm: int = 10) -> dict:
 def rays_per_second(grid: OccupancyGrid, sensors: int, repeats: int, seed: int = 0) -> float:
     """Steady-state rays/s of the ray-casting kernel on ONE thread, 240 beams, 10 m."""
     rng = np.random.default_rng(seed)
-    poses = free_starts(grid, sensors, rng) if grid.resolution_m >= 1.0 else None
-    if poses is None:  # fine grid: sample free points directly
-        xmin, xmax, ymin, ymax = grid.extent_m
-        pts = []
-        while len(pts) < sensors:
-            x, y = rng.uniform(xmin, xmax), rng.uniform(ymin, ymax)
-            if not grid.is_occupied_at(x, y):
-                pts.append((x, y))
-        poses = np.column_stack([np.array(pts), rng.uniform(-np.pi, np.pi, sensors)])
+    xmin, xmax, ymin, ymax = grid.extent_m
+    pts = np.empty((0, 2))
+    while len(pts) < sensors:  # random free points, random headings
+        cand = rng.uniform((xmin, ymin), (xmax, ymax), size=(4 * sensors, 2))
+        pts = np.concatenate([pts, cand[~grid.is_occupied_at(cand[:, 0], cand[:, 1])]])
+    poses = np.column_stack([pts[:sensors], rng.uniform(-np.pi, np.pi, sensors)])
     beams = RangeSensorSpec.thesis_lidar().beam_angles_rad
     angles = poses[:, 2:3] + beams[None, :]
     caster = RayCaster(grid)
@@ -126,7 +123,8 @@ def jit_compile_seconds() -> float:
     """Compile every kernel from scratch in a fresh process with an empty numba cache."""
     code = (
         "import time; t0 = time.perf_counter();"
-        "from agvsim.sensors.raycast import warmup as a; from agvsim.sim.collide import warmup as b;"
+        "from agvsim.sensors.raycast import warmup as a;"
+        "from agvsim.sim.collide import warmup as b;"
         "a(); b(); print(time.perf_counter() - t0)"
     )
     with tempfile.TemporaryDirectory() as cache:

@@ -534,7 +534,7 @@ def _bindings(sc: Scenario, specs: list[RobotSpec], base_dir: Path) -> list[Bind
     for (c, _model_kind, mode, _geo), idx in avoid_groups.items():
         spec0 = specs[idx[0]]
         sensor = next(s for s in spec0.sensors if s.name == c.sensor)
-        front, back = _cone_beams(sensor)
+        front, back = cone_beams(sensor)
         car = [not _can_spin(specs[i].model) for i in idx]
         ctrl: Any = ObstacleAvoidance(
             sensor=c.sensor,
@@ -562,7 +562,7 @@ def _can_spin(model: Any) -> bool:
     return bool(np.all(np.asarray(model.max_steer_rad) >= np.pi / 2 - 1e-9))
 
 
-def _cone_beams(sensor: RangeSensorSpec, half_deg: float = 15.0) -> tuple[tuple, tuple]:
+def cone_beams(sensor: RangeSensorSpec, half_deg: float = 15.0) -> tuple[tuple, tuple]:
     """Beam indices looking ahead and behind (within +-half_deg; the nearest beam at least)."""
     ang = np.angle(np.exp(1j * (sensor.beam_angles_rad + sensor.mount_yaw_rad)))
     out = []

@@ -5,12 +5,16 @@ Drive straight on; when the front range reads below ``trigger_m``, turn 90 deg t
 tripped the thesis; the target is rounded to a multiple of 90 deg so errors do not pile up),
 then drive on. Models that can turn on the spot do so; car-like models
 (tricycle with limited steering, Ackermann) turn on full right lock and, when the front gets
-too close, back up on full left lock (a K-turn). A bump makes every model back away from the nearer obstacle, then turn.
+too close, back up on full left lock (a K-turn). A bump makes every model back away from the
+nearer obstacle, then turn.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from agvsim.control.api import BatchObservation
 from agvsim.kinematics.base import wrap_angle
@@ -60,67 +64,127 @@ class ObstacleAvoidance:
         q = self.turn_angle
         return wrap_angle(np.round(heading / q) * q)
 
-    def _min_range(self, ranges: np.ndarray, beams: np.ndarray) -> np.ndarray:
-        r = ranges[:, beams]
-        r = np.where(r == -np.inf, 0.0, r)  # closer than range_min: as close as it gets
-        return r.min(axis=1)
-
     def step(self, obs: BatchObservation) -> np.ndarray:
         if self.sensor not in obs.ranges:
             raise KeyError(
                 f"obstacle avoidance reads sensor {self.sensor!r}, but the robots have "
                 f"{sorted(obs.ranges)}"
             )
-        ranges = obs.ranges[self.sensor]
-        front = self._min_range(ranges, self.front)
-        back = self._min_range(ranges, self.back) if self.back.size else np.full(len(front), 9e9)
         heading = obs.odom_pose[:, 2]
-        t = obs.t_s
-        s = self.state
-        car = ~self.spin
         if not self._started:  # hold the initial heading (rounded to the maze's axes)
             self.target[:] = self._snap(heading)
             self._started = True
-        close = self.trigger_m * 0.45
-
-        # transitions, each guarded on the current state (first match wins)
-        in_back = s == BACKOFF
-        bumped = obs.bump & ~in_back
-        s[bumped] = BACKOFF
-        self.until[bumped] = t + self.backoff_s
-        # back off away from the nearer obstacle: reverse if the front is nearer, else forward
-        self.back_dir[bumped] = np.where(front[bumped] <= back[bumped], -1.0, 1.0)
-        # done backing off, or bumped again while doing it: turn
-        done_back = in_back & ((t >= self.until) | obs.bump)
-        s[done_back] = TURN
-        self.target[done_back] = self._snap(heading[done_back] - self.turn_angle)
-        start_turn = (s == DRIVE) & (front < self.trigger_m)
-        s[start_turn] = TURN
-        self.target[start_turn] = self._snap(heading[start_turn] - self.turn_angle)
-        err = wrap_angle(self.target - heading)
-        turned = ((s == TURN) | (s == REVERSE)) & (np.abs(err) < self.tol)
-        s[turned] = DRIVE
-        go_back = (s == TURN) & car & (front < close)
-        s[go_back] = REVERSE
-        go_fwd = (s == REVERSE) & ((back < close) | (front > self.trigger_m))
-        s[go_fwd] = TURN
-
-        cmd = np.zeros((len(s), 3))
-        drive = s == DRIVE
-        cmd[drive, 0] = self.speed
-        # hold the target heading while driving (P control): no drift after turns
-        cmd[drive, 2] = np.clip(2.0 * err[drive], -self.rate, self.rate)
-        turn = s == TURN
-        # in place: rotate right, slowing near the target; car-like: creep on full right lock
-        cmd[turn & ~car, 2] = -np.clip(np.abs(err[turn & ~car]) * 3.0, 0.2, 1.0) * self.rate
-        cmd[turn & car, 0] = 0.5 * self.speed
-        cmd[turn & car, 2] = -10.0 * self.rate
-        rev = s == REVERSE
-        cmd[rev, 0] = -0.5 * self.speed
-        cmd[rev, 2] = -10.0 * self.rate
-        back_off = s == BACKOFF
-        cmd[back_off, 0] = 0.5 * self.speed * self.back_dir[back_off]
+        params = np.array(
+            [
+                self.trigger_m,
+                self.speed,
+                self.rate,
+                self.turn_angle,
+                self.tol,
+                self.backoff_s,
+                float(self.snap),
+            ]
+        )
+        cmd = np.zeros((len(heading), 3))
+        _avoid_step(
+            self.state,
+            self.target,
+            self.until,
+            self.back_dir,
+            self.spin,
+            np.ascontiguousarray(obs.ranges[self.sensor]),
+            self.front,
+            self.back,
+            np.ascontiguousarray(heading),
+            np.ascontiguousarray(obs.bump),
+            obs.t_s,
+            params,
+            cmd,
+        )
         return cmd
 
     def state_names(self) -> list[str]:
         return [STATE_NAMES[k] for k in self.state]
+
+
+@njit(cache=True, error_model="numpy")
+def _nearest(ranges, i, beams) -> float:
+    """Smallest reading among ``beams`` of robot i (-inf, too close, counts as 0)."""
+    m = np.inf
+    for b in beams:
+        r = ranges[i, b]
+        if r == -np.inf:
+            r = 0.0
+        m = min(m, r)
+    return m
+
+
+@njit(cache=True, error_model="numpy")
+def _wrap(a: float) -> float:
+    t = math.pi - ((math.pi - a) % (2.0 * math.pi))
+    return math.pi if t <= -math.pi else t
+
+
+@njit(cache=True, error_model="numpy")
+def _snap(h: float, q: float, snap: bool) -> float:
+    return _wrap(round(h / q) * q) if snap else _wrap(h)
+
+
+@njit(cache=True, error_model="numpy")
+def _avoid_step(
+    state,
+    target,
+    until,
+    back_dir,
+    spin,
+    ranges,
+    front_beams,
+    back_beams,
+    heading,
+    bump,
+    t,
+    params,
+    cmd,
+):
+    """One step of the state machine for every robot; writes twists into ``cmd (k, 3)``."""
+    trigger, speed, rate, turn, tol, backoff_s = params[:6]
+    snap = params[6] > 0.5
+    close = 0.45 * trigger
+    for i in range(state.shape[0]):
+        front = _nearest(ranges, i, front_beams)
+        back = _nearest(ranges, i, back_beams) if back_beams.size else np.inf
+        h = heading[i]
+        s = state[i]
+        was_back = s == BACKOFF
+        # transitions, in priority order
+        if bump[i] and not was_back:  # back away from the nearer obstacle
+            s = BACKOFF
+            until[i] = t + backoff_s
+            back_dir[i] = -1.0 if front <= back else 1.0
+        if was_back and (t >= until[i] or bump[i]):
+            s = TURN
+            target[i] = _snap(h - turn, turn, snap)
+        if s == DRIVE and front < trigger:  # the thesis: obstacle ahead -> turn 90 deg right
+            s = TURN
+            target[i] = _snap(h - turn, turn, snap)
+        err = _wrap(target[i] - h)
+        if (s == TURN or s == REVERSE) and abs(err) < tol:
+            s = DRIVE
+        if s == TURN and not spin[i] and front < close:  # car-like: K-turn
+            s = REVERSE
+        if s == REVERSE and (back < close or front > trigger):
+            s = TURN
+        state[i] = s
+        # outputs of the active state
+        vx, w = 0.0, 0.0
+        if s == DRIVE:  # straight on, holding the target heading
+            vx, w = speed, min(max(2.0 * err, -rate), rate)
+        elif s == TURN and spin[i]:  # on the spot, slowing near the target
+            w = -min(max(abs(err) * 3.0, 0.2), 1.0) * rate
+        elif s == TURN:  # creep on full right lock
+            vx, w = 0.5 * speed, -10.0 * rate
+        elif s == REVERSE:  # back on full left lock: still turning right
+            vx, w = -0.5 * speed, -10.0 * rate
+        else:  # BACKOFF
+            vx = 0.5 * speed * back_dir[i]
+        cmd[i, 0], cmd[i, 2] = vx, w

@@ -8,9 +8,11 @@ shared value) or ``(N,)`` arrays (one value per robot); the equations broadcast 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+import math
 from typing import ClassVar, Protocol, TypeVar
 
 import numpy as np
+from numba import njit
 
 TWO_PI = 2.0 * np.pi
 
@@ -22,6 +24,35 @@ def wrap_angle(a: np.ndarray | float) -> np.ndarray:
     return np.where(out <= -np.pi, np.pi, out)
 
 
+@njit(cache=True, error_model="numpy")
+def se2_step(x: float, y: float, th: float, vx: float, vy: float, w: float, dt: float):
+    """One pose moved by a body twist held for ``dt`` s, exactly (scalar kernel; see
+    ``integrate_se2``). Returns (x, y, theta) with theta wrapped to (-pi, pi]."""
+    a = w * dt
+    if abs(a) < 1e-6:  # series of sin(a)/a and (1 - cos a)/a
+        sa = 1.0 - a * a / 6.0
+        ca = a / 2.0 - a * a * a / 24.0
+    else:  # (1 - cos a)/a written as 2 sin^2(a/2)/a: no cancellation for small a
+        sa = math.sin(a) / a
+        h = math.sin(0.5 * a)
+        ca = 2.0 * h * h / a
+    dx = (vx * sa - vy * ca) * dt
+    dy = (vx * ca + vy * sa) * dt
+    ct, st = math.cos(th), math.sin(th)
+    t = math.pi - ((math.pi - (th + a)) % TWO_PI)
+    if t <= -math.pi:
+        t = math.pi
+    return x + ct * dx - st * dy, y + st * dx + ct * dy, t
+
+
+@njit(cache=True)
+def _integrate_rows(poses: np.ndarray, twists: np.ndarray, dt: float, out: np.ndarray) -> None:
+    for i in range(poses.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = se2_step(
+            poses[i, 0], poses[i, 1], poses[i, 2], twists[i, 0], twists[i, 1], twists[i, 2], dt
+        )
+
+
 def integrate_se2(poses: np.ndarray, twists: np.ndarray, dt: float) -> np.ndarray:
     """Move poses ``(N, 3)`` (x, y, theta; world) by body twists ``(N, 3)`` (vx, vy, omega; robot
     frame) held constant for ``dt`` seconds, exactly (SE(2) exponential map, not Euler steps).
@@ -30,26 +61,16 @@ def integrate_se2(poses: np.ndarray, twists: np.ndarray, dt: float) -> np.ndarra
         dx = (vx sin(w dt) - vy (1 - cos(w dt))) / w
         dy = (vx (1 - cos(w dt)) + vy sin(w dt)) / w
     with the limits vx dt, vy dt as w -> 0 (a Taylor series is used for small w dt).
+    One scalar kernel (``se2_step``) does this for every caller.
     """
-    poses = np.asarray(poses, dtype=np.float64)
-    twists = np.asarray(twists, dtype=np.float64)
-    vx, vy, w = twists[..., 0], twists[..., 1], twists[..., 2]
-    a = w * dt
-    small = np.abs(a) < 1e-6
-    a_safe = np.where(small, 1.0, a)
-    # s = sin(a)/a, c = (1 - cos(a))/a, each with a series near zero
-    s = np.where(small, 1.0 - a * a / 6.0, np.sin(a_safe) / a_safe)
-    # (1 - cos a) / a written as 2 sin^2(a/2) / a: no cancellation for small a
-    c = np.where(small, a / 2.0 - a**3 / 24.0, 2.0 * np.sin(a_safe / 2.0) ** 2 / a_safe)
-    dx = (vx * s - vy * c) * dt
-    dy = (vx * c + vy * s) * dt
-    th = poses[..., 2]
-    ct, st = np.cos(th), np.sin(th)
-    out = np.empty_like(poses)
-    out[..., 0] = poses[..., 0] + ct * dx - st * dy
-    out[..., 1] = poses[..., 1] + st * dx + ct * dy
-    out[..., 2] = wrap_angle(th + a)
-    return out
+    p = np.asarray(poses, dtype=np.float64)
+    t = np.asarray(twists, dtype=np.float64)
+    shape = np.broadcast_shapes(p.shape, t.shape)
+    p2 = np.ascontiguousarray(np.broadcast_to(p, shape).reshape(-1, 3))
+    t2 = np.ascontiguousarray(np.broadcast_to(t, shape).reshape(-1, 3))
+    out = np.empty_like(p2)
+    _integrate_rows(p2, t2, float(dt), out)
+    return out.reshape(shape)
 
 
 def saturation_scale(speeds: np.ndarray, max_speed: np.ndarray | float) -> np.ndarray:

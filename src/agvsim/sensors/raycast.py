@@ -18,6 +18,11 @@ pad sensors that have fewer beams than the widest one; they read ``+inf``.
 Grid part: an Amanatides-Woo DDA in float64 over a copy of the grid padded with a ring of
 "outside" cells (no bounds test per step); the distance returned is recomputed from the entry
 face of the hit cell, ``(ox + k * res - x) / cos(angle)``, so it does not accumulate rounding.
+Empty-space skipping (:func:`mark_empty_space`) lets the DDA jump across squares of free cells
+found by a chessboard distance transform; it visits the same hit cell, so results are identical.
+"Exactly" means to float64 rounding: a beam passing within ``1e-12`` x the map's size of a cell
+corner, or running that close along a cell face, touches it, so that the ulp between e.g.
+cos(pi/4) and sin(pi/4) does not decide whether a diagonal beam grazes a wall corner.
 Box part: a uniform bin grid of box centres (bins ~ max range) picks the boxes near each sensor,
 the angular interval of each box's bounding circle picks the beams (when a sensor's beams are
 evenly spaced), and an exact slab test gives the distance.
@@ -25,7 +30,7 @@ evenly spaced), and an exact slab test gives the distance.
 Beam directions: when a sensor's beams are evenly spaced (to within ``1e-12`` rad, modulo
 ``2 pi``) their cos/sin come from rotating a few exact anchors by a small table, which is as
 exact as calling cos/sin per beam (a few ulp) at a fraction of the cost. Direction components
-below ``1e-15`` are snapped to 0 so that beams at multiples of pi/2 are exactly axis-parallel.
+below ``1e-12`` are snapped to 0 so that beams at multiples of pi/2 are exactly axis-parallel.
 """
 
 from __future__ import annotations
@@ -42,7 +47,7 @@ OUTSIDE = 2  # code of the ring of cells around the map in the kernel's table (s
 JUMP = 3  # codes >= JUMP: free cells in the middle of empty space
 _JUMP_MIN = 3  # smallest free radius (cells) worth a jump instead of DDA steps
 _UNIFORM_TOL = 1e-12  # rad: beams this close to an even spacing are treated as evenly spaced
-_SNAP = 1e-15  # direction components below this are exactly 0 (axis-parallel beams)
+_SNAP = 1e-12  # direction components below this are exactly 0 (axis-parallel beams)
 _TABLE = 16  # beams per exact cos/sin anchor for evenly spaced beams
 _CORNER_TOL = 1e-12  # relative to the map's size: beams this close to a cell corner touch it
 _TWO_PI = 2.0 * math.pi
@@ -50,41 +55,38 @@ _TWO_PI = 2.0 * math.pi
 
 # ---------------------------------------------------------------------------- tables
 @njit(cache=True, error_model="numpy")
-def pad_grid(grid_bu: np.ndarray, skip_empty: bool = True) -> np.ndarray:
+def pad_grid(grid_bu: np.ndarray) -> np.ndarray:
     """The kernel's table: a flat uint8 copy of ``grid_bu (ny, nx)`` with a one-cell ring around
     it, shape ``((ny + 2) * (nx + 2),)``; cell ``(iy, ix)`` is at ``(iy + 1) * (nx + 2) + ix + 1``.
-
-    Codes: 1 occupied, ``OUTSIDE`` (2) the ring, 0 free, ``JUMP`` + m (3 + m) free with every cell
-    within Chebyshev distance ``_JUMP_MIN + m`` free and on the map (empty-space skipping; only
-    with ``skip_empty``). Radii come from a two-pass chessboard distance transform.
-    """
+    Codes: 1 occupied, 0 free, ``OUTSIDE`` (2) the ring; see :func:`mark_empty_space`."""
     ny, nx = grid_bu.shape
-    h, w = ny + 2, nx + 2
-    dist = np.zeros((h, w), dtype=np.int32)  # chessboard distance to the nearest wall or ring cell
-    big = h + w if skip_empty else 0
+    w = nx + 2
+    out = np.full((ny + 2) * w, OUTSIDE, dtype=np.uint8)
     for iy in range(ny):
         for ix in range(nx):
-            dist[iy + 1, ix + 1] = 0 if grid_bu[iy, ix] != 0 else big
-    for i in range(1, h - 1 if skip_empty else 1):
-        for j in range(1, w - 1):
-            m = min(dist[i - 1, j - 1], dist[i - 1, j], dist[i - 1, j + 1], dist[i, j - 1]) + 1
-            dist[i, j] = min(dist[i, j], m)
-    for i in range(h - 2 if skip_empty else 0, 0, -1):
-        for j in range(w - 2, 0, -1):
-            m = min(dist[i + 1, j + 1], dist[i + 1, j], dist[i + 1, j - 1], dist[i, j + 1]) + 1
-            dist[i, j] = min(dist[i, j], m)
-    out = np.full(h * w, OUTSIDE, dtype=np.uint8)
-    for iy in range(ny):
-        for ix in range(nx):
-            r = dist[iy + 1, ix + 1] - 1  # free radius
-            if grid_bu[iy, ix] != 0:
-                code = 1
-            elif skip_empty and r >= _JUMP_MIN:
-                code = JUMP + min(r - _JUMP_MIN, 255 - JUMP)
-            else:
-                code = 0
-            out[(iy + 1) * w + ix + 1] = code
+            out[(iy + 1) * w + ix + 1] = 1 if grid_bu[iy, ix] != 0 else 0
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def mark_empty_space(cells: np.ndarray, nx: int, ny: int) -> None:
+    """Empty-space skipping, in place: a free cell whose every cell within Chebyshev distance
+    ``r >= _JUMP_MIN`` is free and on the map gets code ``JUMP + r - _JUMP_MIN`` (capped at 255),
+    and the DDA jumps across that square. Radii from a two-pass chessboard distance transform."""
+    h, w = ny + 2, nx + 2
+    dist = np.where(cells == 0, h + w, 0).astype(np.int32)  # to the nearest wall or ring cell
+    for i in range(1, h - 1):
+        for j in range(i * w + 1, i * w + w - 1):
+            m = min(dist[j - w - 1], dist[j - w], dist[j - w + 1], dist[j - 1]) + 1
+            dist[j] = min(dist[j], m)
+    for i in range(h - 2, 0, -1):
+        for j in range(i * w + w - 2, i * w, -1):
+            m = min(dist[j + w + 1], dist[j + w], dist[j + w - 1], dist[j + 1]) + 1
+            dist[j] = min(dist[j], m)
+    for j in range(h * w):
+        r = dist[j] - 1  # free radius
+        if cells[j] == 0 and r >= _JUMP_MIN:
+            cells[j] = JUMP + min(r - _JUMP_MIN, 255 - JUMP)
 
 
 @njit(cache=True, error_model="numpy")
@@ -175,6 +177,20 @@ def _cell_of(v: float, o: float, res: float, n: int) -> tuple[int, bool]:
 
 
 @njit(cache=True, error_model="numpy")
+def _origin_cell(v: float, o: float, res: float, n: int, eps: float) -> tuple[int, bool]:
+    """:func:`_cell_of` for a sensor origin, taking a coordinate within ``eps`` of a cell face as
+    on it (so that a beam running a hair beside a wall face grazes it, like beams passing within
+    eps of a corner)."""
+    i, on = _cell_of(v, o, res, n)
+    if not on and -2 < i < n + 2:
+        if o + (i + 1) * res - v <= eps:
+            return i + 1, True
+        if v - (o + i * res) <= eps:
+            return i, True
+    return i, on
+
+
+@njit(cache=True, error_model="numpy")
 def _axis_ray(cells, idx, lane, stride, k, n, d, p0, o, res, tlim):
     """Beam parallel to one axis: step along it from cell ``k`` (flat index ``idx``), testing the
     cells at ``idx`` and ``idx + lane`` (the second lane when the beam runs on a cell face)."""
@@ -222,105 +238,124 @@ def _jump(v, idx, sx, sy, tmx, tmy, tdx, tdy, ax, ay, eps):
     return t, idx + kx * sx + ky * sy, tmx + kx * tdx, tmy + ky * tdy
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def grid_ray(cells, nx, ny, res, ox, oy, inv_res, inv_w, x0, y0, ix, onx, iy, ony, inside, eps,
-             c, s, ic, is_, tlim):
-    """Distance along the unit direction ``(c, s)`` (``ic = 1 / c``, ``is_ = 1 / s``) from
-    ``(x0, y0)`` to the first occupied cell of the padded grid ``cells`` (see :func:`pad_grid`),
-    or inf if none within ``tlim``.
-
-    ``inv_res = 1 / res``, ``inv_w = 1 / (nx + 2)``; ``ix, onx, iy, ony`` come from
-    :func:`_cell_of` for the origin; ``inside`` says the origin is in
-    the closed map rectangle, in which case the caller has checked it touches no occupied cell.
-    Beams passing within ``eps`` (see :func:`corner_eps`) of a cell corner touch it.
-    """
+@njit(cache=True, error_model="numpy")
+def _axis_beam(cells, nx, ny, res, ox, oy, x0, y0, ix, onx, iy, ony, c, s, tlim):
+    """Beam along x (``s == 0``) or y (``c == 0``): see :func:`_axis_ray`."""
     w = nx + 2
-    if s == 0.0 or c == 0.0:  # axis-parallel: may run along a face and touch two cell lanes
-        if s == 0.0:
-            if iy < 0 or iy > ny or (iy == ny and not ony):
-                return np.inf
-            k = ix - 1 if (c < 0.0 and onx) else ix
-            k = min(max(k, -1), nx)
-            lane = -w if ony else 0
-            return _axis_ray(cells, (iy + 1) * w + k + 1, lane, 1, k, nx, c, x0, ox, res, tlim)
-        if ix < 0 or ix > nx or (ix == nx and not onx):
+    if s == 0.0:
+        if iy < 0 or iy > ny or (iy == ny and not ony):
             return np.inf
-        k = iy - 1 if (s < 0.0 and ony) else iy
-        k = min(max(k, -1), ny)
-        lane = -1 if onx else 0
-        return _axis_ray(cells, (k + 1) * w + ix + 1, lane, w, k, ny, s, y0, oy, res, tlim)
-    if inside:
-        cx = ix - 1 if (c < 0.0 and onx) else ix
-        cy = iy - 1 if (s < 0.0 and ony) else iy
-    else:  # clip to the map rectangle and start in the ring cell just before the entry face
-        xa, xb = (ox - x0) * ic, (ox + nx * res - x0) * ic
-        ya, yb = (oy - y0) * is_, (oy + ny * res - y0) * is_
-        txi, txo = min(xa, xb), max(xa, xb)
-        tyi, tyo = min(ya, yb), max(ya, yb)
-        tin, tout = max(txi, tyi), min(txo, tyo)
-        if tin > tout + eps or tout < 0.0 or tin > tlim:
-            return np.inf
-        # the cell row (column) a touch before the entry point, so that an entry within eps of
-        # a cell corner takes the corner branch below
-        if txi >= tyi:
-            cx = -1 if c > 0.0 else nx
-            cy = min(max(_cell_of(y0 + tin * s - math.copysign(eps, s), oy, res, ny)[0], 0), ny - 1)
-        else:
-            cy = -1 if s > 0.0 else ny
-            cx = min(max(_cell_of(x0 + tin * c - math.copysign(eps, c), ox, res, nx)[0], 0), nx - 1)
-    if (cx >= nx and c > 0.0) or (cx < 0 and c < 0.0) or (cy >= ny and s > 0.0) or (
-        cy < 0 and s < 0.0
-    ):
-        return np.inf  # starts on the map border heading out
-    sx = 1 if c > 0.0 else -1
-    sy = w if s > 0.0 else -w
-    tmx = (ox + (cx + 1 if c > 0.0 else cx) * res - x0) * ic
-    tmy = (oy + (cy + 1 if s > 0.0 else cy) * res - y0) * is_
-    tdx, tdy = res * abs(ic), res * abs(is_)
-    ax, ay = abs(c) * inv_res, abs(s) * inv_res
-    tl = tlim + 1e-9 * (1.0 + tlim)
-    idx = (cy + 1) * w + cx + 1
-    v = cells[idx] if inside else 0
-    if v >= JUMP:
-        t, idx, tmx, tmy = _jump(v, idx, sx, sy, tmx, tmy, tdx, tdy, ax, ay, eps)
-        if t > tl:
-            return np.inf
-    while True:
-        d = tmx - tmy
-        if d < -eps:
-            if tmx > tl:
-                return np.inf
-            idx += sx
-            tmx += tdx
-        elif d > eps:
-            if tmy > tl:
-                return np.inf
-            idx += sy
-            tmy += tdy
-        else:  # through a cell corner: the two side cells touch the beam too
-            if tmx > tl:
-                return np.inf
-            side = cells[idx + sx] == 1 or cells[idx + sy] == 1
-            idx += sx + sy
-            tmx += tdx
-            tmy += tdy
-            if side:
-                break
-        v = cells[idx]
-        if v != 0:
-            if v == 1:
-                break
-            if v == OUTSIDE:
-                return np.inf
+        k = min(max(ix - 1 if (c < 0.0 and onx) else ix, -1), nx)
+        lane = -w if ony else 0
+        return _axis_ray(cells, (iy + 1) * w + k + 1, lane, 1, k, nx, c, x0, ox, res, tlim)
+    if ix < 0 or ix > nx or (ix == nx and not onx):
+        return np.inf
+    k = min(max(iy - 1 if (s < 0.0 and ony) else iy, -1), ny)
+    lane = -1 if onx else 0
+    return _axis_ray(cells, (k + 1) * w + ix + 1, lane, w, k, ny, s, y0, oy, res, tlim)
+
+
+@njit(cache=True, error_model="numpy")
+def _entry_cell(nx, ny, res, ox, oy, x0, y0, c, s, ic, is_, eps, tlim):
+    """For an origin off the map: the ring cell ``(cx, cy)`` just before the beam enters the map,
+    or ``(-2, -2)`` if it misses the map within ``tlim``. The cell across the beam is taken a
+    touch before the entry point, so an entry within eps of a cell corner takes the DDA's corner
+    branch."""
+    xa, xb = (ox - x0) * ic, (ox + nx * res - x0) * ic
+    ya, yb = (oy - y0) * is_, (oy + ny * res - y0) * is_
+    txi, txo = min(xa, xb), max(xa, xb)
+    tyi, tyo = min(ya, yb), max(ya, yb)
+    tin, tout = max(txi, tyi), min(txo, tyo)
+    if tin > tout + eps or tout < 0.0 or tin > tlim:
+        return -2, -2
+    if txi >= tyi:
+        cy = _cell_of(y0 + tin * s - math.copysign(eps, s), oy, res, ny)[0]
+        return (-1 if c > 0.0 else nx), min(max(cy, 0), ny - 1)
+    cx = _cell_of(x0 + tin * c - math.copysign(eps, c), ox, res, nx)[0]
+    return min(max(cx, 0), nx - 1), (-1 if s > 0.0 else ny)
+
+
+@njit(cache=True, error_model="numpy")
+def grid_beams(table, x0, y0, org, eps, dirs, n, r_max, row):
+    """Lower ``row[k]`` (``k < n``) to the distance from ``(x0, y0)`` along the unit direction
+    ``dirs[k, :2]`` (``dirs[k, 2:] = 1 / dirs[k, :2]``) to the first occupied cell, if within
+    ``min(r_max, row[k])``. ``table = (cells, nx, ny, res, ox, oy)`` (:func:`pad_grid`).
+
+    ``org = (ix, onx, iy, ony, inside)``: the origin's cell (:func:`_origin_cell`) and whether it
+    is in the closed map rectangle, in which case the caller has checked that it touches no
+    occupied cell. Beams passing within ``eps`` (:func:`corner_eps`) of a cell corner touch it.
+    """
+    cells, nx, ny, res, ox, oy = table
+    ix, onx, iy, ony, inside = org
+    w = nx + 2
+    inv_res, inv_w = 1.0 / res, 1.0 / w
+    for k in range(n):
+        c, s, ic, is_ = dirs[k, 0], dirs[k, 1], dirs[k, 2], dirs[k, 3]
+        tlim = min(r_max, row[k])
+        if s == 0.0 or c == 0.0:  # axis-parallel: may run along a face, touching two lanes
+            t = _axis_beam(cells, nx, ny, res, ox, oy, x0, y0, ix, onx, iy, ony, c, s, tlim)
+            row[k] = min(row[k], t)
+            continue
+        if inside:
+            cx = ix - 1 if (c < 0.0 and onx) else ix
+            cy = iy - 1 if (s < 0.0 and ony) else iy
+        else:  # start in the ring cell before the entry face
+            cx, cy = _entry_cell(nx, ny, res, ox, oy, x0, y0, c, s, ic, is_, eps, tlim)
+            if cx == -2:
+                continue
+        out_x = (cx >= nx and c > 0.0) or (cx < 0 and c < 0.0)
+        if out_x or (cy >= ny and s > 0.0) or (cy < 0 and s < 0.0):
+            continue  # starts on the map border heading out
+        sx = 1 if c > 0.0 else -1
+        sy = w if s > 0.0 else -w
+        tmx = (ox + (cx + 1 if c > 0.0 else cx) * res - x0) * ic
+        tmy = (oy + (cy + 1 if s > 0.0 else cy) * res - y0) * is_
+        tdx, tdy = res * abs(ic), res * abs(is_)
+        ax, ay = abs(c) * inv_res, abs(s) * inv_res
+        tl = tlim + 1e-9 * (1.0 + tlim)
+        idx = (cy + 1) * w + cx + 1
+        v = cells[idx] if inside else 0
+        if v >= JUMP:
             t, idx, tmx, tmy = _jump(v, idx, sx, sy, tmx, tmy, tdx, tdy, ax, ay, eps)
             if t > tl:
-                return np.inf
-    # entry distance of the hit cell (its later entry face), correctly rounded
-    row = int((idx + 0.5) * inv_w) - 1
-    col = idx - (row + 1) * w - 1
-    t = max((ox + (col if c > 0.0 else col + 1) * res - x0) / c,
-            (oy + (row if s > 0.0 else row + 1) * res - y0) / s)
-    return t if t <= tlim else np.inf
+                continue
+        hit = False
+        while True:
+            d = tmx - tmy
+            if d < -eps:
+                if tmx > tl:
+                    break
+                idx += sx
+                tmx += tdx
+            elif d > eps:
+                if tmy > tl:
+                    break
+                idx += sy
+                tmy += tdy
+            else:  # through a cell corner: the two side cells touch the beam too
+                if tmx > tl:
+                    break
+                hit = cells[idx + sx] == 1 or cells[idx + sy] == 1
+                idx += sx + sy
+                tmx += tdx
+                tmy += tdy
+                if hit:
+                    break
+            v = cells[idx]
+            if v != 0:
+                hit = v == 1
+                if v < JUMP:
+                    break
+                t, idx, tmx, tmy = _jump(v, idx, sx, sy, tmx, tmy, tdx, tdy, ax, ay, eps)
+                if t > tl:
+                    break
+        if hit:  # entry distance of the hit cell (its later entry face), correctly rounded
+            gy = int((idx + 0.5) * inv_w) - 1
+            gx = idx - (gy + 1) * w - 1
+            tx = (ox + (gx if c > 0.0 else gx + 1) * res - x0) / c
+            t = max(tx, (oy + (gy if s > 0.0 else gy + 1) * res - y0) / s)
+            if t <= tlim:
+                row[k] = min(row[k], t)
 
 
 # ---------------------------------------------------------------------------- beams and boxes
@@ -343,7 +378,7 @@ def beam_directions(angles: np.ndarray, dirs: np.ndarray) -> tuple[int, bool, fl
             n = b
             break
     step = (angles[n - 1] - angles[0]) / (n - 1) if n >= 2 else 0.0
-    uniform = n >= 2 and step != 0.0 and math.isfinite(step)
+    uniform = n >= 2 and 1e-9 < abs(step) < 1e3  # the broad phase divides by the step
     if uniform:
         for k in range(n):
             e = angles[k] - (angles[0] + k * step)
@@ -403,21 +438,20 @@ def ray_box(px: float, py: float, lc: float, ls: float, hl: float, hw: float) ->
 
 
 @njit(cache=True, error_model="numpy")
-def _hit_box(out, dirs, k, j, boxes, btab, px, py, r_max):
+def _hit_box(out, dirs, k, box, cs, px, py, r_max):
     c, s = dirs[k, 0], dirs[k, 1]
-    t = ray_box(
-        px, py, c * btab[j, 0] + s * btab[j, 1], s * btab[j, 0] - c * btab[j, 1],
-        boxes[j, 3], boxes[j, 4],
-    )
+    lc, ls = c * cs[0] + s * cs[1], s * cs[0] - c * cs[1]  # the beam in the box frame
+    t = ray_box(px, py, lc, ls, box[3], box[4])
     if t <= r_max and t < out[k]:
         out[k] = t
 
 
 @njit(cache=True, error_model="numpy")
-def boxes_for_sensor(out, dirs, n, uniform, a0, step, x0, y0, r_max, skip, boxes, btab,
-                     start, items, geom):
+def boxes_for_sensor(out, dirs, n, uniform, a0, step, x0, y0, r_max, skip, bins):
     """Lower ``out[:n]`` to the distance of the nearest box along each beam (broad phase by bins
-    and, for evenly spaced beams, by the angle the box's bounding circle subtends)."""
+    and, for evenly spaced beams, by the angle the box's bounding circle subtends).
+    ``bins = (boxes, btab, start, items, geom)`` (:func:`box_tables`, :func:`build_center_bins`)."""
+    boxes, btab, start, items, geom = bins
     bx0, bx1, by0, by1 = bin_window(geom, x0, y0)
     nbx = int(geom[3])
     for by in range(by0, by1 + 1):
@@ -432,8 +466,9 @@ def boxes_for_sensor(out, dirs, n, uniform, a0, step, x0, y0, r_max, skip, boxes
                 d = math.hypot(dx, dy)
                 if d > r_max + rad:
                     continue
-                px = -(dx * btab[j, 0] + dy * btab[j, 1])  # sensor origin in the box frame
-                py = dx * btab[j, 1] - dy * btab[j, 0]
+                box, cs = boxes[j], btab[j]
+                px = -(dx * cs[0] + dy * cs[1])  # sensor origin in the box frame
+                py = dx * cs[1] - dy * cs[0]
                 if uniform and d > rad:
                     half = math.asin(rad / d) + 1e-9
                     mid = math.atan2(dy, dx)
@@ -445,53 +480,53 @@ def boxes_for_sensor(out, dirs, n, uniform, a0, step, x0, y0, r_max, skip, boxes
                     while lo <= n - 1:
                         k0, k1 = max(int(math.ceil(lo)), 0), min(int(math.floor(hi)), n - 1)
                         for k in range(k0, k1 + 1):
-                            _hit_box(out, dirs, k, j, boxes, btab, px, py, r_max)
+                            _hit_box(out, dirs, k, box, cs, px, py, r_max)
                         lo += per
                         hi += per
                 else:
                     for k in range(n):
-                        _hit_box(out, dirs, k, j, boxes, btab, px, py, r_max)
+                        _hit_box(out, dirs, k, box, cs, px, py, r_max)
 
 
 # ---------------------------------------------------------------------------- kernels
-@njit(cache=True, parallel=True, fastmath=False, error_model="numpy")
-def cast_rays_padded(cells, nx, ny, res, ox, oy, origins, beam_angles, max_range, boxes,
-                     ignore_box, btab, start, items, geom, out):
-    """Core kernel over a padded grid (:func:`pad_grid`) and prebuilt box bins
-    (:func:`build_center_bins` with bin size >= max range + largest box radius, :func:`box_tables`).
-    Shapes and conventions as :func:`cast_rays`; parallel over sensors."""
-    n_sensors, n_beams = beam_angles.shape
+@njit(cache=True, error_model="numpy")
+def cast_sensor(table, bins, x0, y0, angles, r_max, skip, row):
+    """All beams of one sensor at ``(x0, y0)`` with beams ``angles (B,)``, writing ``row (B,)``;
+    see :func:`cast_rays_padded`."""
+    cells, nx, ny, res, ox, oy = table
     w = nx + 2
-    inv_res, inv_w = 1.0 / res, 1.0 / w
-    for si in prange(n_sensors):
-        x0, y0, r_max = origins[si, 0], origins[si, 1], max_range[si]
-        row = out[si]
-        dirs = np.empty((n_beams, 4))
-        n, uniform, step = beam_directions(beam_angles[si], dirs)
-        row[:] = np.inf
-        ix, onx = _cell_of(x0, ox, res, nx)
-        iy, ony = _cell_of(y0, oy, res, ny)
-        inside = ox <= x0 <= ox + nx * res and oy <= y0 <= oy + ny * res
-        eps = corner_eps(nx, ny, res, ox, oy, x0, y0)
-        if inside:
-            touch = False
-            for ky in range(iy - 1 if ony else iy, iy + 1):
-                for kx in range(ix - 1 if onx else ix, ix + 1):
-                    touch = touch or cells[(ky + 1) * w + kx + 1] == 1
-            if touch:
-                row[:n] = 0.0
-                continue
-        boxes_for_sensor(row, dirs, n, uniform, beam_angles[si, 0], step, x0, y0, r_max,
-                         ignore_box[si], boxes, btab, start, items, geom)
-        for k in range(n):
-            tlim = min(r_max, row[k])
-            t = grid_ray(cells, nx, ny, res, ox, oy, inv_res, inv_w, x0, y0, ix, onx, iy, ony,
-                         inside, eps, dirs[k, 0], dirs[k, 1], dirs[k, 2], dirs[k, 3], tlim)
-            if t < row[k]:
-                row[k] = t
+    dirs = np.empty((angles.shape[0], 4))
+    n, uniform, step = beam_directions(angles, dirs)
+    row[:] = np.inf
+    eps = corner_eps(nx, ny, res, ox, oy, x0, y0)
+    ix, onx = _origin_cell(x0, ox, res, nx, eps)
+    iy, ony = _origin_cell(y0, oy, res, ny, eps)
+    inside = ox - eps <= x0 <= ox + nx * res + eps and oy - eps <= y0 <= oy + ny * res + eps
+    if inside:  # origin in or on a wall cell: 0 on every beam
+        for ky in range(iy - 1 if ony else iy, iy + 1):
+            for kx in range(ix - 1 if onx else ix, ix + 1):
+                if cells[(ky + 1) * w + kx + 1] == 1:
+                    row[:n] = 0.0
+                    return
+    boxes_for_sensor(row, dirs, n, uniform, angles[0], step, x0, y0, r_max, skip, bins)
+    grid_beams(table, x0, y0, (ix, onx, iy, ony, inside), eps, dirs, n, r_max, row)
 
 
 @njit(cache=True, parallel=True, fastmath=False, error_model="numpy")
+def cast_rays_padded(table, bins, origins, beam_angles, max_range, ignore_box, out):
+    """Core kernel, parallel over sensors; shapes and conventions as :func:`cast_rays`.
+
+    ``table = (cells, nx, ny, res, ox, oy)``: the padded table (:func:`pad_grid`, optionally
+    :func:`mark_empty_space`) and the map's size, cell size and origin. ``bins = (boxes, btab,
+    start, items, geom)``: the boxes, :func:`box_tables` and :func:`build_center_bins` of their
+    centres with bin size >= max range + largest box radius."""
+    for si in prange(beam_angles.shape[0]):
+        x0, y0 = origins[si, 0], origins[si, 1]
+        r_max, skip = max_range[si], ignore_box[si]
+        cast_sensor(table, bins, x0, y0, beam_angles[si], r_max, skip, out[si])
+
+
+@njit(cache=True, error_model="numpy")
 def cast_rays(grid_bu, res, ox, oy, origins, beam_angles, max_range, boxes, ignore_box, out):
     """Cast every beam of every sensor in one call; writes ``out (S, B)``, metres.
 
@@ -503,25 +538,58 @@ def cast_rays(grid_bu, res, ox, oy, origins, beam_angles, max_range, boxes, igno
         footprint) or -1. out (S, B): distance to the first wall or box touched, inf without a
         return within max range or for a NaN beam, 0 from inside a wall cell or a box.
 
-    Pads the grid and bins the boxes on every call; :class:`RayCaster` keeps the padded grid.
+    Pads the grid and bins the boxes on every call, then runs the parallel kernel
+    :func:`cast_rays_padded` (prange over sensors); :class:`RayCaster` keeps the padded table.
     """
-    cells = pad_grid(grid_bu, False)
     btab = box_tables(boxes)
     size = max_range.max() if max_range.shape[0] > 0 else 1.0
     size += btab[:, 2].max() if boxes.shape[0] > 0 else 0.0
     start, items, geom = build_center_bins(boxes, size)
     ny, nx = grid_bu.shape
-    cast_rays_padded(cells, nx, ny, res, ox, oy, origins, beam_angles, max_range, boxes,
-                     ignore_box, btab, start, items, geom, out)
+    table = (pad_grid(grid_bu), nx, ny, res, ox, oy)
+    bins = (boxes, btab, start, items, geom)
+    cast_rays_padded(table, bins, origins, beam_angles, max_range, ignore_box, out)
 
 
 # ---------------------------------------------------------------------------- wrapper
+def _as_array(a, dtype) -> np.ndarray:
+    """C-contiguous, writeable (one compiled kernel signature for every caller)."""
+    arr = np.ascontiguousarray(a, dtype=dtype)
+    return arr if arr.flags.writeable else arr.copy()
+
+
 def _as_f64(name: str, a, shape_tail: tuple[int, ...]) -> np.ndarray:
-    arr = np.ascontiguousarray(a, dtype=np.float64)
+    arr = _as_array(a, np.float64)
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
         want = ", ".join(["N", *map(str, shape_tail)])
         raise ValueError(f"{name} must have shape ({want}), got {arr.shape}")
     return arr
+
+
+_EMPTY_BOXES = np.zeros((0, 5))
+_INPUT_ERRORS = (
+    "origins must be finite",
+    "beam_angles must be finite or NaN (padding)",
+    "max_range must be positive and finite",
+    "boxes must be finite with half sizes >= 0",
+    "ignore_box entries must be -1 or a box index < {k}",
+)
+
+
+@njit(cache=True, error_model="numpy")
+def _check_inputs(origins, beam_angles, max_range, boxes, ignore_box) -> int:
+    """0 if the inputs are valid, else 1 + the index of the first broken rule in _INPUT_ERRORS."""
+    if not np.all(np.isfinite(origins)):
+        return 1
+    if np.any(np.isinf(beam_angles)):
+        return 2
+    if not np.all((max_range > 0.0) & np.isfinite(max_range)):
+        return 3
+    if not np.all(np.isfinite(boxes)) or np.any(boxes[:, 3:] < 0.0):
+        return 4
+    if np.any((ignore_box < -1) | (ignore_box >= boxes.shape[0])):
+        return 5
+    return 0
 
 
 class RayCaster:
@@ -538,10 +606,12 @@ class RayCaster:
     def set_grid(self, grid: OccupancyGrid) -> None:
         """Use a new map (rebuilds the kernel's table, O(cells))."""
         self.grid = grid
-        self._cells = pad_grid(np.ascontiguousarray(grid.cells_bu, dtype=np.uint8), self.skip_empty)
-        self._ny, self._nx = grid.cells_bu.shape
-        self._res = float(grid.resolution_m)
-        self._ox, self._oy = (float(v) for v in grid.origin_xy_m)
+        ny, nx = grid.cells_bu.shape
+        cells = pad_grid(np.ascontiguousarray(grid.cells_bu, dtype=np.uint8))
+        if self.skip_empty:
+            mark_empty_space(cells, nx, ny)
+        ox, oy = (float(v) for v in grid.origin_xy_m)
+        self._table = (cells, int(nx), int(ny), float(grid.resolution_m), ox, oy)
 
     def cast(
         self,
@@ -558,34 +628,33 @@ class RayCaster:
         ``ignore_box (S,)``: the box each sensor does not see (its own footprint) or -1.
         No return reads inf; see the module docstring for the 0 and NaN conventions."""
         org = _as_f64("origins", origins, (2,))
-        ang = np.ascontiguousarray(beam_angles, dtype=np.float64)
-        if ang.ndim != 2 or ang.shape[0] != org.shape[0]:
-            raise ValueError(f"beam_angles must have shape (S, B) with S = {org.shape[0]} "
-                             f"sensors, got {ang.shape}")
-        if not np.all(np.isfinite(org)):
-            raise ValueError("origins must be finite")
-        if np.any(np.isinf(ang)):
-            raise ValueError("beam_angles must be finite or NaN (padding)")
+        ang = _as_array(beam_angles, np.float64)
         s = org.shape[0]
-        rng = np.ascontiguousarray(np.broadcast_to(np.asarray(max_range, np.float64), (s,)))
-        if np.ndim(max_range) not in (0, 1) or (np.ndim(max_range) == 1 and len(max_range) != s):
+        if ang.ndim != 2 or ang.shape[0] != s:
+            raise ValueError(f"beam_angles must have shape (S, B), S = {s}, got {ang.shape}")
+        if np.ndim(max_range) == 0:
+            rng = np.full(s, max_range, dtype=np.float64)
+        elif np.shape(max_range) == (s,):
+            rng = _as_array(max_range, np.float64)
+        else:
             raise ValueError(f"max_range must be a number or have shape ({s},)")
-        if not np.all((rng > 0) & np.isfinite(rng)):
-            raise ValueError(f"max_range must be positive and finite, got {max_range}")
-        bx = np.zeros((0, 5)) if boxes is None else _as_f64("boxes", boxes, (5,))
-        if not np.all(np.isfinite(bx)) or np.any(bx[:, 3:] < 0):
-            raise ValueError("boxes must be finite with half sizes >= 0")
+        bx = _EMPTY_BOXES if boxes is None else _as_f64("boxes", boxes, (5,))
         if ignore_box is None:
             ign = np.full(s, -1, dtype=np.int64)
         else:
-            ign = np.ascontiguousarray(ignore_box, dtype=np.int64)
+            ign = _as_array(ignore_box, np.int64)
             if ign.shape != (s,):
                 raise ValueError(f"ignore_box must have shape ({s},), got {ign.shape}")
-            if np.any((ign < -1) | (ign >= len(bx))):
-                raise ValueError(f"ignore_box entries must be -1 or a box index < {len(bx)}")
+        bad = _check_inputs(org, ang, rng, bx, ign)
+        if bad:
+            raise ValueError(_INPUT_ERRORS[bad - 1].format(k=len(bx)))
         if out is None:
             out = np.empty(ang.shape)
-        elif out.shape != ang.shape or out.dtype != np.float64 or not out.flags.c_contiguous:
+        elif (
+            out.shape != ang.shape
+            or out.dtype != np.float64
+            or not (out.flags.c_contiguous and out.flags.writeable)
+        ):
             raise ValueError(f"out must be a C-contiguous float64 array of shape {ang.shape}")
         if s == 0 or ang.shape[1] == 0:
             out[...] = np.inf
@@ -593,12 +662,16 @@ class RayCaster:
         btab = box_tables(bx)
         size = float(rng.max()) + (float(btab[:, 2].max()) if len(bx) else 0.0)
         start, items, geom = build_center_bins(bx, size)
-        cast_rays_padded(self._cells, self._nx, self._ny, self._res, self._ox, self._oy, org, ang,
-                         rng, bx, ign, btab, start, items, geom, out)
+        bins = (bx, btab, start, items, geom)
+        cast_rays_padded(self._table, bins, org, ang, rng, ign, out)
         return out
 
     def cast_single(
-        self, x: float, y: float, angles: np.ndarray, max_range: float,
+        self,
+        x: float,
+        y: float,
+        angles: np.ndarray,
+        max_range: float,
         boxes: np.ndarray | None = None,
     ) -> np.ndarray:
         """Ranges ``(B,)`` of one sensor at ``(x, y)`` with beams at world ``angles`` (rad)."""
@@ -617,8 +690,7 @@ def warmup() -> float:
     boxes = np.array([[0.5, 0.5, 0.3, 0.2, 0.1], [2.5, 2.5, 0.0, 0.2, 0.1]])
     ang = np.array([[0.0, 1.0, 2.0], [0.5, np.nan, np.nan]])
     org = np.array([[0.5, 0.5], [2.5, 0.5]])
-    caster.cast(org, ang, 2.0, boxes, np.array([0, -1]))
-    out = np.empty(ang.shape)
-    cast_rays(grid.cells_bu, 1.0, 0.0, 0.0, org, ang, np.full(2, 2.0), boxes,
-              np.array([0, -1], dtype=np.int64), out)
+    own, r_max, out = np.array([0, -1]), np.full(2, 2.0), np.empty(ang.shape)
+    caster.cast(org, ang, 2.0, boxes, own)
+    cast_rays(grid.cells_bu, 1.0, 0.0, 0.0, org, ang, r_max, boxes, own, out)
     return time.perf_counter() - t0

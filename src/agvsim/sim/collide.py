@@ -4,7 +4,7 @@ Boxes are ``(K, 5)`` float64 rows ``cx, cy, theta, half_length, half_width`` (me
 world frame; half_length along the box's own x axis), for robot footprints and static obstacles
 alike. Two shapes *overlap* when their intersection has positive area: shapes that only touch
 along an edge or at a corner do not collide. Every test is an exact separating-axis test (SAT)
-in float64; orientations within ``1e-15`` of a multiple of pi/2 are snapped so that axis-aligned
+in float64; orientations within ``1e-12`` of a multiple of pi/2 are snapped so that axis-aligned
 boxes touch exactly.
 """
 
@@ -19,7 +19,7 @@ from agvsim.sensors.raycast import bin_window, box_tables, build_center_bins
 from agvsim.world.grid import OccupancyGrid
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rects_overlap(ax, ay, ac, as_, ahl, ahw, bx, by, bc, bs, bhl, bhw) -> bool:
     """SAT: do the oriented rectangles (centre, cos/sin of heading, half sizes) overlap with
     positive area? Touching rectangles do not."""
@@ -37,7 +37,7 @@ def rects_overlap(ax, ay, ac, as_, ahl, ahw, bx, by, bc, bs, bhl, bhw) -> bool:
     return abs(-dx * bs + dy * bc) < bhw + ahl * ss + ahw * cc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _box_hits_grid(grid_bu, res, ox, oy, x, y, c, s, hl, hw) -> bool:
     ny, nx = grid_bu.shape
     ex = hl * abs(c) + hw * abs(s)  # half extents of the box's axis-aligned bounding box
@@ -68,7 +68,7 @@ def _box_hits_grid(grid_bu, res, ox, oy, x, y, c, s, hl, hw) -> bool:
     return False
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def boxes_hit_grid(grid_bu, res, ox, oy, boxes):
     """``(N,)`` bool: box i overlaps an occupied cell of ``grid_bu (ny, nx)`` (bottom-up, cell
     (iy, ix) covers ``[ox + ix res, ox + (ix + 1) res) x [oy + iy res, ...)``), or reaches
@@ -77,23 +77,44 @@ def boxes_hit_grid(grid_bu, res, ox, oy, boxes):
     hit = np.zeros(n, dtype=np.bool_)
     tab = box_tables(boxes)
     for i in prange(n):
-        hit[i] = _box_hits_grid(grid_bu, res, ox, oy, boxes[i, 0], boxes[i, 1], tab[i, 0],
-                                tab[i, 1], boxes[i, 3], boxes[i, 4])
+        hit[i] = _box_hits_grid(
+            grid_bu,
+            res,
+            ox,
+            oy,
+            boxes[i, 0],
+            boxes[i, 1],
+            tab[i, 0],
+            tab[i, 1],
+            boxes[i, 3],
+            boxes[i, 4],
+        )
     return hit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _overlap(boxes, tab, i, others, otab, j) -> bool:
     dx, dy = others[j, 0] - boxes[i, 0], others[j, 1] - boxes[i, 1]
     r = tab[i, 2] + otab[j, 2]
     if dx * dx + dy * dy >= r * r * (1.0 + 1e-12):
         return False  # bounding circles apart
-    return rects_overlap(boxes[i, 0], boxes[i, 1], tab[i, 0], tab[i, 1], boxes[i, 3], boxes[i, 4],
-                         others[j, 0], others[j, 1], otab[j, 0], otab[j, 1], others[j, 3],
-                         others[j, 4])
+    return rects_overlap(
+        boxes[i, 0],
+        boxes[i, 1],
+        tab[i, 0],
+        tab[i, 1],
+        boxes[i, 3],
+        boxes[i, 4],
+        others[j, 0],
+        others[j, 1],
+        otab[j, 0],
+        otab[j, 1],
+        others[j, 3],
+        others[j, 4],
+    )
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy")
 def boxes_hit_boxes(boxes, others):
     """``(N,)`` bool: box i overlaps any of ``others (M, 5)`` (static obstacles)."""
     n = boxes.shape[0]
@@ -104,22 +125,21 @@ def boxes_hit_boxes(boxes, others):
     size = tab[:, 2].max() + otab[:, 2].max()
     start, items, geom = build_center_bins(others, size)
     nbx = int(geom[3])
-    for i in prange(n):
+    for i in range(n):
         bx0, bx1, by0, by1 = bin_window(geom, boxes[i, 0], boxes[i, 1])
-        found = False
         for by in range(by0, by1 + 1):
             for bx in range(bx0, bx1 + 1):
                 b = by * nbx + bx
                 for q in range(start[b], start[b + 1]):
-                    if not found and _overlap(boxes, tab, i, others, otab, items[q]):
-                        found = True
-        hit[i] = found
+                    if not hit[i] and _overlap(boxes, tab, i, others, otab, items[q]):
+                        hit[i] = True
     return hit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pairs_of(i, boxes, tab, start, items, geom, dst, at):
-    """Count the boxes j > i overlapping box i; write them to ``dst[at:]`` when ``at >= 0``."""
+    """Count the boxes j > i overlapping box i; write them to ``dst[at:]`` as pairs (i, j) when
+    ``at >= 0``."""
     bx0, bx1, by0, by1 = bin_window(geom, boxes[i, 0], boxes[i, 1])
     nbx = int(geom[3])
     m = 0
@@ -135,7 +155,7 @@ def _pairs_of(i, boxes, tab, start, items, geom, dst, at):
     return m
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy")
 def box_pairs_overlapping(boxes):
     """``(P, 2)`` int64: every pair ``i < j`` of ``boxes (N, 5)`` that overlap, sorted by
     ``(i, j)``. Broad phase: bins of box centres 2 x the largest bounding radius wide."""
@@ -144,26 +164,31 @@ def box_pairs_overlapping(boxes):
         return np.zeros((0, 2), dtype=np.int64)
     tab = box_tables(boxes)
     start, items, geom = build_center_bins(boxes, 2.0 * tab[:, 2].max())
-    counts = np.zeros(n, dtype=np.int64)
-    dummy = np.zeros((0, 2), dtype=np.int64)
-    for i in prange(n):
-        counts[i] = _pairs_of(i, boxes, tab, start, items, geom, dummy, -1)
-    offs = np.zeros(n + 1, dtype=np.int64)
+    dummy = np.empty((0, 2), dtype=np.int64)
+    m = 0
+    for i in range(n):  # count first, so the output is allocated once
+        m += _pairs_of(i, boxes, tab, start, items, geom, dummy, -1)
+    pairs = np.empty((m, 2), dtype=np.int64)
+    m = 0
     for i in range(n):
-        offs[i + 1] = offs[i] + counts[i]
-    pairs = np.empty((offs[n], 2), dtype=np.int64)
-    for i in prange(n):
-        if counts[i] > 0:
-            _pairs_of(i, boxes, tab, start, items, geom, pairs, offs[i])
-            pairs[offs[i]:offs[i + 1], 1] = np.sort(pairs[offs[i]:offs[i + 1], 1])
+        k = _pairs_of(i, boxes, tab, start, items, geom, pairs, m)
+        for q in range(m + 1, m + k):  # insertion sort of the few partners j of box i
+            j, p = pairs[q, 1], q
+            while p > m and pairs[p - 1, 1] > j:
+                pairs[p, 1] = pairs[p - 1, 1]
+                p -= 1
+            pairs[p, 1] = j
+        m += k
     return pairs
 
 
 def _boxes(name: str, a) -> np.ndarray:
     arr = np.ascontiguousarray(a, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != 5:
-        raise ValueError(f"{name} must have shape (N, 5): cx, cy, theta, half_length, half_width;"
-                         f" got {arr.shape}")
+        raise ValueError(
+            f"{name} must have shape (N, 5): cx, cy, theta, half_length, half_width;"
+            f" got {arr.shape}"
+        )
     if not np.all(np.isfinite(arr)) or np.any(arr[:, 3:] < 0):
         raise ValueError(f"{name} must be finite with half sizes >= 0")
     return arr

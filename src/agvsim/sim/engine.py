@@ -11,7 +11,7 @@ Each step, for every robot together (structure of arrays, a loop over model kind
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,9 +29,11 @@ from agvsim.kinematics import actuation
 from agvsim.kinematics.base import integrate_se2, stack_models
 from agvsim.sensors.range_sensor import apply_noise
 from agvsim.sensors.raycast import RayCaster
+from agvsim.sensors.raycast import box_tables
 from agvsim.sim.collide import Collider
+from agvsim.sim.kernels import move_bodies
 from agvsim.sim.spec import ControlMode, RobotSpec, World
-from agvsim.sim.state import SensorTable, SimState
+from agvsim.sim.state import SensorTable, SimState  # noqa: F401 - SensorTable in hints
 
 W_MAX = 4  # most wheels of any model
 S_MAX = 2  # most steered wheels of any model
@@ -86,6 +88,7 @@ class Simulation:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
         self.world, self.robots, self.dt_s, self.seed = world, list(robots), float(dt_s), seed
         self.bindings = list(controllers)
+        self._binding_idx = [np.asarray(b.robots, dtype=np.int64) for b in self.bindings]
         self.n = len(self.robots)
         self.caster = RayCaster(world.grid)
         self.collider = Collider(world.grid)
@@ -96,6 +99,7 @@ class Simulation:
         self._offset = np.array([r.body_offset_x_m for r in self.robots], dtype=np.float64)
         self._radius = np.array([r.bounding_radius_m for r in self.robots])
         self._substep_len = 0.5 * min(world.grid.resolution_m, float(hl_hw.min()))
+        self._static_tab = box_tables(world.boxes)
         self._odo = np.array(
             [
                 (
@@ -146,7 +150,9 @@ class Simulation:
         # command buffers: twist (N, 3) and wheels (N, 3 = up to 4 driven? ) per robot
         self._cmd_twist = np.zeros((n, 3))
         self._cmd_wheels = np.zeros((n, W_MAX + 1))
-        self._cmd_is_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
+        self._mode_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
+        self._cmd_is_twist = self._mode_twist.copy()
+        self._batch_slots: dict[bytes, dict[str, np.ndarray]] = {}
         for b in self.bindings:
             if b.batch:
                 b.controller.reset(len(b.robots), self.rng)
@@ -172,8 +178,7 @@ class Simulation:
     # ------------------------------------------------------------------ stages
     def _control(self) -> None:
         st = self.state
-        for b in self.bindings:
-            idx = np.asarray(b.robots)
+        for b, idx in zip(self.bindings, self._binding_idx, strict=True):
             live = idx[~st.stopped[idx]]
             if live.size == 0:
                 continue
@@ -189,8 +194,30 @@ class Simulation:
             cmd = np.asarray(ctrl.step(obs), dtype=np.float64)
         except Exception as exc:  # noqa: BLE001 - reported with robot names
             raise ControllerError(",".join(self.robots[i].name for i in idx), obs.t_s, exc) from exc
-        for k, i in enumerate(idx):
-            self._store_command(int(i), cmd[k], None)
+        self._store_batch(idx, cmd)
+
+    def _store_batch(self, idx: np.ndarray, cmd: np.ndarray) -> None:
+        """Store a batch controller's ``(k, m)`` commands, read by each robot's mode."""
+        if cmd.ndim != 2 or cmd.shape[0] != len(idx):
+            raise ControllerError(
+                self.robots[int(idx[0])].name,
+                self.state.t_s,
+                ValueError(f"a batch controller for {len(idx)} robots returned shape {cmd.shape}"),
+            )
+        finite = np.isfinite(cmd).all(axis=1)
+        if not finite.all():
+            k = int(np.flatnonzero(~finite)[0])
+            raise ControllerError(
+                self.robots[int(idx[k])].name,
+                self.state.t_s,
+                ValueError(f"command {cmd[k].tolist()} is not all finite numbers"),
+            )
+        is_tw = self._mode_twist[idx]
+        self._cmd_is_twist[idx] = is_tw
+        if is_tw.any():
+            self._cmd_twist[idx[is_tw]] = cmd[is_tw, :3]
+        if not is_tw.all():
+            self._cmd_wheels[idx[~is_tw], : cmd.shape[1]] = cmd[~is_tw]
 
     def _control_one(self, ctrl: object, i: int) -> None:
         obs = self.observation(i)
@@ -264,26 +291,24 @@ class Simulation:
         start = st.poses
         sweep = (np.hypot(twist[:, 0], twist[:, 1]) + np.abs(twist[:, 2]) * self._radius) * dt
         n_sub = max(1, int(np.ceil(sweep.max() / self._substep_len)))
-        good = start.copy()
-        active = np.any(twist != 0.0, axis=1)
-        bump = np.zeros(self.n, dtype=bool)
-        static = self.world.boxes
-        for k in range(1, n_sub + 1):
-            if not active.any():
-                break
-            idx = np.flatnonzero(active)
-            cand = integrate_se2(start[idx], twist[idx], dt * k / n_sub)
-            boxes = self.footprints_subset(cand, idx)
-            hit = self.collider.hit_walls(boxes)
-            if len(static):
-                hit |= self.collider.hit_static(boxes, static)
-            ok = idx[~hit]
-            good[ok] = cand[~hit]
-            bump[idx[hit]] = True
-            active[idx[hit]] = False
+        grid = self.world.grid
+        good, bump, dist, boxes = move_bodies(
+            grid.cells_bu,
+            grid.resolution_m,
+            grid.origin_xy_m[0],
+            grid.origin_xy_m[1],
+            start,
+            twist,
+            dt,
+            n_sub,
+            self._offset,
+            self._half,
+            self.world.boxes,
+            self._static_tab,
+        )
         # robots against robots: undo both moves of every overlapping pair until none is left
         for _ in range(self.n):
-            pairs = self.collider.overlapping_pairs(self.footprints(good))
+            pairs = self.collider.overlapping_pairs(boxes)
             if len(pairs) == 0:
                 break
             involved = np.unique(pairs)
@@ -292,26 +317,16 @@ class Simulation:
             if moved.size == 0:
                 break
             good[moved] = start[moved]
+            dist[moved] = 0.0
+            boxes = self.footprints(good)
         st.collisions += bump & ~st.bump
         st.bump = bump
-        # path length: exact arc length for free motion, the chord for a move cut short
-        chord = np.hypot(good[:, 0] - start[:, 0], good[:, 1] - start[:, 1])
-        st.distance_m += np.where(bump, chord, np.hypot(twist[:, 0], twist[:, 1]) * dt)
+        st.distance_m += dist
         twist[bump] = 0.0
         st.wheel_speeds[bump] = 0.0
         st.poses = good
         st.twists = twist
         st.wheel_angles += st.wheel_speeds * dt
-
-    def footprints_subset(self, poses: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        off = self._offset[idx]
-        out = np.empty((len(poses), 5))
-        out[:, 0] = poses[:, 0] + c * off
-        out[:, 1] = poses[:, 1] + s * off
-        out[:, 2] = poses[:, 2]
-        out[:, 3:5] = self._half[idx]
-        return out
 
     def _dead_reckon(self, twist: np.ndarray) -> None:
         """Integrate noisy wheel-encoder readings into the odometry pose."""
@@ -338,20 +353,35 @@ class Simulation:
         due = np.ones(tab.count, dtype=bool) if force else st.t_s >= st.next_scan_s - 1e-9
         if not due.any():
             return
-        s = np.flatnonzero(due)
+        # every sensor due at once (the common case) is handled with slices, not gathers
+        s = slice(None) if due.all() else np.flatnonzero(due)
         owner = tab.owner[s]
         pose = st.poses[owner]
         c, sn = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         mx, my = tab.mount[s, 0], tab.mount[s, 1]
         origins = np.stack([pose[:, 0] + c * mx - sn * my, pose[:, 1] + sn * mx + c * my], -1)
-        angles = (pose[:, 2] + tab.mount[s, 2])[:, None] + tab.rel_angles[s]
+        width = int(tab.num_beams[s].max())  # only as many columns as the widest due sensor
+        rel = tab.rel_angles[s, :width] if width < tab.max_beams else tab.rel_angles[s]
+        angles = rel + (pose[:, 2] + tab.mount[s, 2])[:, None]
         boxes = self.footprints(st.poses)
         if len(self.world.boxes):
             boxes = np.concatenate([boxes, self.world.boxes])
-        exact = self.caster.cast(origins, angles, tab.range_max[s], boxes, owner)
-        st.scans[s] = apply_noise(
-            exact, tab.range_min[s], tab.range_max[s], tab.noise[s], tab.dropout[s], self.rng
+        post = tab.post[s].any()  # noise, dropout or a minimum range to apply
+        direct = isinstance(s, slice) and width == tab.max_beams and not post
+        exact = self.caster.cast(
+            origins, angles, tab.range_max[s], boxes, owner, out=st.scans if direct else None
         )
+        if post:
+            exact = apply_noise(
+                exact,
+                tab.range_min[s],
+                tab.range_max[s],
+                tab.noise[s],
+                tab.dropout[s],
+                self.rng,
+            )
+        if not direct:
+            st.scans[s, :width] = exact
         st.scan_stamp[s] = st.t_s
         st.next_scan_s[s] = st.t_s + tab.period_s[s]
 
@@ -385,10 +415,13 @@ class Simulation:
 
     def batch_observation(self, idx: np.ndarray) -> BatchObservation:
         st, tab = self.state, self.sensors
-        ranges = {}
-        for name in tab.common_names(idx):
-            slots = np.array([tab.slot(int(i), name) for i in idx])
-            ranges[name] = st.scans[slots, : tab.specs[slots[0]].num_beams]
+        key = idx.tobytes()
+        if key not in self._batch_slots:  # which sensor slots each name maps to, once
+            self._batch_slots[key] = {
+                name: np.array([tab.slot(int(i), name) for i in idx])
+                for name in tab.common_names(idx)
+            }
+        ranges = _LazyRanges(st.scans, self._batch_slots[key], tab)
         return BatchObservation(
             t_s=st.t_s,
             robots=idx,
@@ -403,6 +436,27 @@ class Simulation:
             if r.name == name:
                 return i
         raise KeyError(f"no robot named {name!r}; robots: {[r.name for r in self.robots]}")
+
+
+class _LazyRanges(Mapping):
+    """sensor name -> (k, B) readings, gathered only when a controller asks for them."""
+
+    def __init__(self, scans: np.ndarray, slots: dict[str, np.ndarray], tab: SensorTable):
+        self._scans, self._slots, self._tab = scans, slots, tab
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        slots = self._slots[name]
+        width = self._tab.specs[int(slots[0])].num_beams
+        lo, hi = int(slots[0]), int(slots[-1])
+        if hi - lo + 1 == len(slots) and np.all(np.diff(slots) == 1):
+            return self._scans[lo : hi + 1, :width]  # consecutive slots: a view, no copy
+        return self._scans[slots, :width]
+
+    def __iter__(self):
+        return iter(self._slots)
+
+    def __len__(self) -> int:
+        return len(self._slots)
 
 
 def _subset(model: object, sel: np.ndarray) -> object:

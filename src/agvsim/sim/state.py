@@ -19,11 +19,13 @@ class SensorTable:
     owner: np.ndarray  # (S,) robot index
     mount: np.ndarray  # (S, 3) x, y, yaw in the robot frame
     rel_angles: np.ndarray  # (S, B_max) beam angles in the sensor frame, NaN padded
+    num_beams: np.ndarray  # (S,) beams of each sensor
     range_min: np.ndarray  # (S,)
     range_max: np.ndarray  # (S,)
     noise: np.ndarray  # (S,)
     dropout: np.ndarray  # (S,)
     period_s: np.ndarray  # (S,)
+    post: np.ndarray  # (S,) bool: readings need noise, dropout or the range_min rule
     slots_of: list[list[int]]  # robot index -> its slots
 
     @property
@@ -59,11 +61,13 @@ class SensorTable:
                 [(*s.mount_xy_m, s.mount_yaw_rad) for s in specs], dtype=np.float64
             ).reshape(-1, 3),
             rel_angles=rel,
+            num_beams=np.array([sp.num_beams for sp in specs], dtype=np.int64),
             range_min=col("range_min_m"),
             range_max=col("range_max_m"),
             noise=col("noise_std_m"),
             dropout=col("dropout_prob"),
             period_s=1.0 / col("rate_hz") if specs else np.zeros(0),
+            post=(col("noise_std_m") > 0) | (col("dropout_prob") > 0) | (col("range_min_m") > 0),
             slots_of=slots_of,
         )
 
