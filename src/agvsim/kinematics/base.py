@@ -7,8 +7,8 @@ shared value) or ``(N,)`` arrays (one value per robot); the equations broadcast 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
 import math
+from dataclasses import dataclass, fields, replace
 from typing import ClassVar, Protocol, TypeVar
 
 import numpy as np

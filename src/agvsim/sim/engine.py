@@ -28,8 +28,7 @@ from agvsim.control.api import (
 from agvsim.kinematics import actuation
 from agvsim.kinematics.base import integrate_se2, stack_models
 from agvsim.sensors.range_sensor import apply_noise
-from agvsim.sensors.raycast import RayCaster
-from agvsim.sensors.raycast import box_tables
+from agvsim.sensors.raycast import RayCaster, box_tables
 from agvsim.sim.collide import Collider
 from agvsim.sim.kernels import move_bodies
 from agvsim.sim.spec import ControlMode, RobotSpec, World
