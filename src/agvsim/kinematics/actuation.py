@@ -43,13 +43,12 @@ def from_drive(model: KinematicModel, drive: np.ndarray, steering: np.ndarray) -
     drive = np.asarray(drive, dtype=np.float64)
     drive = drive * saturation_scale(drive, model.max_wheel_speed_rad_s)[..., None]
     twist = model.forward(drive, steering)
-    wheels = model.inverse(twist)
-    speeds = wheels.speeds.copy()
+    if not model.has_steering and len(model.driven_wheels) == len(model.wheel_names):
+        # every wheel is driven (differential, Mecanum, omni): the drive is the whole story
+        return Actuation(twist, drive, drive, np.zeros(drive.shape[:-1] + (0,)), steering)
+    speeds = model.inverse(twist).speeds.copy()  # passive wheels turn as the motion requires
     speeds[..., list(model.driven_wheels)] = drive
-    if model.has_steering:
-        steer_angles = model.steer_angles_for(steering)  # type: ignore[attr-defined]
-    else:
-        steer_angles = wheels.steer_angles
+    steer_angles = model.steer_angles_for(steering)  # type: ignore[attr-defined]
     return Actuation(twist, drive, speeds, steer_angles, steering)
 
 

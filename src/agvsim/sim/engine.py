@@ -12,7 +12,7 @@ Each step, for every robot together (structure of arrays, a loop over model kind
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -66,7 +66,11 @@ class _Group:
     n_wheels: int
     n_steer: int
     cmd_width: int
-    wheel_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    sel: slice | np.ndarray  # the robots: a slice when they are consecutive
+    driven: slice | list  # driven wheel columns
+    rel: np.ndarray | None = None  # (k, 1) encoder noise, None when zero for all
+    abs: np.ndarray | None = None
+    steer_noise: np.ndarray | None = None
 
 
 class Simulation:
@@ -99,16 +103,6 @@ class Simulation:
         self._radius = np.array([r.bounding_radius_m for r in self.robots])
         self._substep_len = 0.5 * min(world.grid.resolution_m, float(hl_hw.min()))
         self._static_tab = box_tables(world.boxes)
-        self._odo = np.array(
-            [
-                (
-                    r.odometry.wheel_noise_rel,
-                    r.odometry.wheel_noise_abs_rad_s,
-                    r.odometry.steering_noise_rad,
-                )
-                for r in self.robots
-            ]
-        )
         self.reset(seed)
 
     # ------------------------------------------------------------------ set-up
@@ -118,9 +112,22 @@ class Simulation:
             key = (type(r.model), getattr(r.model, "steering_geometry", None))
             by_kind.setdefault(key, []).append(i)
         groups = []
+        odo = np.array(
+            [
+                (
+                    r.odometry.wheel_noise_rel,
+                    r.odometry.wheel_noise_abs_rad_s,
+                    r.odometry.steering_noise_rad,
+                )
+                for r in self.robots
+            ]
+        )
         for idx in by_kind.values():
             model = stack_models([self.robots[i].model for i in idx])
             n_drive = len(model.driven_wheels)
+            dw = list(model.driven_wheels)
+            consecutive = idx == list(range(idx[0], idx[0] + len(idx)))
+            o = odo[idx]
             groups.append(
                 _Group(
                     idx=np.array(idx),
@@ -129,6 +136,11 @@ class Simulation:
                     n_wheels=len(model.wheel_names),
                     n_steer=len(model.steered_wheels),
                     cmd_width=n_drive + int(model.has_steering),
+                    sel=slice(idx[0], idx[0] + len(idx)) if consecutive else np.array(idx),
+                    driven=slice(dw[0], dw[-1] + 1) if dw == list(range(dw[0], dw[-1] + 1)) else dw,
+                    rel=o[:, 0:1] if np.any(o[:, 0] > 0) else None,
+                    abs=o[:, 1:2] if np.any(o[:, 1] > 0) else None,
+                    steer_noise=o[:, 2] if model.has_steering and np.any(o[:, 2] > 0) else None,
                 )
             )
         return groups
@@ -256,21 +268,22 @@ class Simulation:
             for sel, by_twist in ((is_tw, True), (~is_tw, False)):
                 if not sel.any():
                     continue
-                idx = g.idx[sel]
-                model = g.model if sel.all() else _subset(g.model, sel)
+                whole = sel.all()
+                idx = g.sel if whole else g.idx[sel]
+                model = g.model if whole else _subset(g.model, sel)
                 if by_twist:
                     a = actuation.from_twist(model, self._cmd_twist[idx], st.steering[idx], dt)
                 else:
                     w = self._cmd_wheels[idx]
-                    steer = w[:, g.n_drive] if model.has_steering else np.zeros(len(idx))
+                    steer = w[:, g.n_drive] if model.has_steering else np.zeros(len(w))
                     a = actuation.from_wheels(model, w[:, : g.n_drive], steer, st.steering[idx], dt)
                 twist[idx] = a.twist
                 st.wheel_speeds[idx, : g.n_wheels] = a.wheel_speeds
                 st.steering[idx] = a.steering
                 st.steer_angles[idx, : g.n_steer] = a.steer_angles
-        stopped = st.stopped
-        twist[stopped] = 0.0
-        st.wheel_speeds[stopped] = 0.0
+        if st.stopped.any():
+            twist[st.stopped] = 0.0
+            st.wheel_speeds[st.stopped] = 0.0
         return twist
 
     def footprints(self, poses: np.ndarray) -> np.ndarray:
@@ -331,18 +344,17 @@ class Simulation:
         """Integrate noisy wheel-encoder readings into the odometry pose."""
         st, rng = self.state, self.rng
         for g in self._groups:
-            idx = g.idx
-            drive = st.wheel_speeds[idx][:, list(g.model.driven_wheels)]
-            rel, ab, sn = self._odo[idx, 0:1], self._odo[idx, 1:2], self._odo[idx, 2]
-            if np.any(rel > 0):
-                drive = drive * (1.0 + rel * rng.standard_normal(drive.shape))
-            if np.any(ab > 0):
-                drive = drive + ab * rng.standard_normal(drive.shape)
-            steer = st.steering[idx]
-            if g.model.has_steering and np.any(sn > 0):
-                steer = steer + sn * rng.standard_normal(len(idx))
+            sel = g.sel
+            drive = st.wheel_speeds[sel, g.driven]
+            if g.rel is not None:
+                drive = drive * (1.0 + g.rel * rng.standard_normal(drive.shape))
+            if g.abs is not None:
+                drive = drive + g.abs * rng.standard_normal(drive.shape)
+            steer = st.steering[sel]
+            if g.steer_noise is not None:
+                steer = steer + g.steer_noise * rng.standard_normal(steer.shape)
             odo_twist = g.model.forward(drive, steer)
-            st.odom_poses[idx] = integrate_se2(st.odom_poses[idx], odo_twist, self.dt_s)
+            st.odom_poses[sel] = integrate_se2(st.odom_poses[sel], odo_twist, self.dt_s)
 
     def _sense(self, force: bool = False) -> None:
         """Cast every sensor that is due now, for all robots, in one kernel call."""
