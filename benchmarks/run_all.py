@@ -1,6 +1,6 @@
 """Run every benchmark and print one JSON object (same as ``agvsim bench --json``).
 
-    python benchmarks/run_all.py [--quick]
+python benchmarks/run_all.py [--quick]
 """
 
 import json

@@ -156,6 +156,7 @@ class AvoidConfig(_Strict):
     trigger_m: float = Field(0.8, gt=0)
     speed_m_s: float = Field(0.5, gt=0)
     turn_rate_rad_s: float = Field(1.0, gt=0)
+    heading_source: Literal["true_pose", "odometry"] = "true_pose"
 
 
 class PythonControllerConfig(_Strict):
@@ -178,9 +179,7 @@ class RobotConfig(_Strict):
     name: str = Field(min_length=1)
     model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
     mode: ControlMode = ControlMode.INVERSE
-    params: dict[str, float | str] = Field(
-        {}, description="model parameters, see `agvsim models`"
-    )
+    params: dict[str, float | str] = Field({}, description="model parameters, see `agvsim models`")
     body: Body = Body()
     pose: Pose = Pose()
     color: str = "#d62728"
@@ -337,8 +336,13 @@ def build_grid(cfg: WorldConfig, base_dir: Path) -> OccupancyGrid:
     elif cfg.random is not None:
         r = cfg.random
         grid = mazes.random_maze(
-            r.rows, r.cols, r.seed, corridor_cells=r.corridor_cells, wall_cells=r.wall_cells,
-            resolution_m=res, loop_fraction=r.loop_fraction,
+            r.rows,
+            r.cols,
+            r.seed,
+            corridor_cells=r.corridor_cells,
+            wall_cells=r.wall_cells,
+            resolution_m=res,
+            loop_fraction=r.loop_fraction,
         )
     else:
         path = Path(cfg.file or "")
@@ -469,8 +473,11 @@ def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any
     except Exception as err:  # noqa: BLE001 - the user's file: report, don't crash
         line = f" (line {err.lineno})" if isinstance(err, SyntaxError) and err.lineno else ""
         raise ScenarioError(
-            "", [f"{where}.controller.file: {path.name} could not be loaded{line}: "
-                 f"{type(err).__name__}: {err}"]
+            "",
+            [
+                f"{where}.controller.file: {path.name} could not be loaded{line}: "
+                f"{type(err).__name__}: {err}"
+            ],
         ) from None
     obj = getattr(module, cfg.name, None)
     if obj is None:
@@ -543,6 +550,7 @@ def _bindings(sc: Scenario, specs: list[RobotSpec], base_dir: Path) -> list[Bind
             trigger_m=c.trigger_m,
             speed_m_s=c.speed_m_s,
             turn_rate_rad_s=c.turn_rate_rad_s,
+            heading_source=c.heading_source,
             can_spin=~np.array(car),
         )
         if mode == ControlMode.FORWARD:

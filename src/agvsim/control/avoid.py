@@ -1,12 +1,13 @@
 """The thesis's obstacle avoidance (Fig. 22), for every model, as one batch controller.
 
-Drive straight on; when the front range reads below ``trigger_m``, turn 90 deg to the right
-(measured with the wheel-odometry heading, with a tolerance rather than the float equality that
-tripped the thesis; the target is rounded to a multiple of 90 deg so errors do not pile up),
-then drive on. Models that can turn on the spot do so; car-like models
-(tricycle with limited steering, Ackermann) turn on full right lock and, when the front gets
-too close, back up on full left lock (a K-turn). A bump makes every model back away from the
-nearer obstacle, then turn.
+Drive straight on; when the front range reads below ``trigger_m``, turn 90 deg to the right,
+then drive on. Angles are compared with a tolerance (the thesis's float equality failed on
+discrete steps) and the target heading is rounded to a multiple of 90 deg, so errors do not
+pile up. The heading comes from the ground-truth pose, as the thesis's charts read the
+simulator's pose feedback, or from wheel odometry (``heading_source="odometry"``). Models that
+turn on the spot do so; car-like models (tricycle with limited steering, Ackermann) turn on
+full right lock and, when the front gets too close, back up on full left lock (a K-turn). A
+bump makes every model back away from the nearer obstacle, then turn.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ class ObstacleAvoidance:
         tolerance_rad: float = 0.01,
         backoff_s: float = 0.6,
         snap: bool = True,
+        heading_source: str = "true_pose",
     ):
         self.sensor = sensor
         self.front = np.asarray(front_beams, dtype=np.int64)
@@ -47,6 +49,11 @@ class ObstacleAvoidance:
         self.turn_angle, self.tol, self.backoff_s = turn_angle_rad, tolerance_rad, backoff_s
         self.can_spin = np.asarray(can_spin, dtype=bool)
         self.snap = snap
+        if heading_source not in ("true_pose", "odometry"):
+            raise ValueError(
+                f"heading_source must be 'true_pose' or 'odometry', got {heading_source!r}"
+            )
+        self.heading_source = heading_source
 
     def reset(self, k: int, rng: np.random.Generator) -> None:
         self.state = np.full(k, DRIVE, dtype=np.int64)
@@ -70,7 +77,10 @@ class ObstacleAvoidance:
                 f"obstacle avoidance reads sensor {self.sensor!r}, but the robots have "
                 f"{sorted(obs.ranges)}"
             )
-        heading = obs.odom_pose[:, 2]
+        # the thesis's charts read the simulator's pose feedback; 'odometry' is what a real
+        # robot has (its heading drifts with encoder noise, and so does the robot's path)
+        pose = obs.true_pose if self.heading_source == "true_pose" else obs.odom_pose
+        heading = pose[:, 2]
         if not self._started:  # hold the initial heading (rounded to the maze's axes)
             self.target[:] = self._snap(heading)
             self._started = True
@@ -161,7 +171,9 @@ def _avoid_step(
             s = BACKOFF
             until[i] = t + backoff_s
             back_dir[i] = -1.0 if front <= back else 1.0
-        if was_back and (t >= until[i] or bump[i]):
+        if was_back and bump[i]:  # blocked that way too: try the other way
+            back_dir[i] = -back_dir[i]
+        if was_back and t >= until[i]:
             s = TURN
             target[i] = _snap(h - turn, turn, snap)
         if s == DRIVE and front < trigger:  # the thesis: obstacle ahead -> turn 90 deg right

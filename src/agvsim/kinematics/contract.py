@@ -32,43 +32,44 @@ Properties checked (tolerances are relative to the size of the row being compare
 Reachable twists are built from the model's own constraints: vy = 0 unless ``holonomic``; for
 car-like models (``has_steering``) the bicycle steering angle ``inverse(t).steering`` within
 ``+-max_steer`` (so omega = 0 when vx = 0 if max_steer < pi/2); every wheel within its limit.
+
+Layout: this module holds :func:`check_model` and the model and integration properties; the
+twist sampling, shared helpers and tolerances are in ``_contract_twists``, the actuation
+properties in ``_contract_actuation``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from agvsim.kinematics.actuation import Actuation, from_twist, from_wheels
+from agvsim.kinematics._contract_actuation import (
+    _check_from_twist,
+    _check_from_wheels,
+    _check_no_side_slip,
+    _check_steering_sequence,
+)
+from agvsim.kinematics._contract_twists import (
+    BATCH_TOL,
+    DT,
+    LIMIT_SLACK,  # noqa: F401 - re-exported, like the other tolerances
+    RTOL,
+    _evaluate,
+    _robot,
+    _stack_size,
+    _steer_limits,
+    make_reachable,
+    reachable_twists,
+)
+from agvsim.kinematics.actuation import from_twist, from_wheels
 from agvsim.kinematics.base import integrate_se2, wrap_angle
 
 __all__ = ["check_model", "make_reachable", "reachable_twists"]
 
-RTOL = 1e-9  # forward/inverse round trips, directions
-BATCH_TOL = 1e-12  # batch vs one robot at a time; saturation arithmetic
-LIMIT_SLACK = 1e-12  # rad/s above a wheel limit that still counts as within it
 CIRCLE_TOL_M = 1e-9
-DT = 0.05  # control period used for the actuation checks
-
-_SPECIAL_TWISTS = np.array(
-    [
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [1.0, 0.0, 1.0],
-        [-1.0, 0.0, 1.0],
-        [1.0, 1.0, -1.0],
-    ]
-)
-
 
 _REQUIRED = (
     "kind",
@@ -85,93 +86,6 @@ _REQUIRED = (
     "wheel_positions_m",
     "steering_limits",
 )
-
-# ----------------------------------------------------------------------------- parameters
-
-
-def _params(model: Any) -> dict[str, Any]:
-    if dataclasses.is_dataclass(model):
-        return {f.name: getattr(model, f.name) for f in dataclasses.fields(model)}
-    return dict(vars(model))
-
-
-def _stack_size(model: Any) -> int | None:
-    """N for a model whose parameters are ``(N,)`` arrays, None when every one is a scalar."""
-    shapes = {
-        np.shape(v) for v in _params(model).values() if isinstance(v, np.ndarray) and v.ndim > 0
-    }
-    if not shapes:
-        return None
-    if len(shapes) > 1 or len(next(iter(shapes))) != 1:
-        raise AssertionError(
-            f"check_model({type(model).__name__}): parameters must be scalars or (N,) arrays of "
-            f"one length N, got shapes {sorted(shapes)}"
-        )
-    return next(iter(shapes))[0]
-
-
-def _robot(model: Any, i: int) -> Any:
-    """Robot ``i`` of a stacked model as a model of one robot (parameters of shape (1,))."""
-    arrays = {
-        k: v[i : i + 1]
-        for k, v in _params(model).items()
-        if isinstance(v, np.ndarray) and v.ndim > 0
-    }
-    return dataclasses.replace(model, **arrays) if arrays else model
-
-
-def _per_robot(value: Any, m: int) -> np.ndarray:
-    """A scalar or ``(N,)`` parameter as an ``(m,)`` array (m == N for stacks)."""
-    return np.broadcast_to(np.asarray(value, dtype=np.float64), (m,)).copy()
-
-
-def _steer_limits(model: Any, m: int) -> tuple[np.ndarray, np.ndarray]:
-    if not model.has_steering:
-        return np.zeros(m), np.zeros(m)
-    angle, rate = model.steering_limits()
-    return _per_robot(angle, m), _per_robot(rate, m)
-
-
-def _driven_peak(model: Any, speeds: np.ndarray) -> np.ndarray:
-    return np.max(np.abs(speeds[:, list(model.driven_wheels)]), axis=-1)
-
-
-# ----------------------------------------------------------------------------- sampling
-
-
-def make_reachable(model: Any, twists: np.ndarray, fraction: np.ndarray | float) -> np.ndarray:
-    """Project body twists ``(m, 3)`` onto what ``model`` can do, then scale each so that its
-    fastest wheel turns at ``fraction`` of the wheel limit (a zero twist stays zero).
-
-    vy is zeroed for non-holonomic models. For car-like models omega is zeroed where vx == 0
-    and max_steer < pi/2, and reduced where the bicycle angle ``inverse(t).steering`` is beyond
-    ``max_steer`` (to 0.98 max_steer: the angle is atan(L omega / vx), so tan scales with omega).
-    """
-    t = np.array(twists, dtype=np.float64)
-    m = t.shape[0]
-    if not model.holonomic:
-        t[:, 1] = 0.0
-    if model.has_steering:
-        max_angle, _ = _steer_limits(model, m)
-        t[(t[:, 0] == 0.0) & (max_angle < np.pi / 2), 2] = 0.0
-        delta = np.abs(model.inverse(t).steering)
-        over = delta > max_angle
-        t[over, 2] *= np.tan(0.98 * max_angle[over]) / np.tan(delta[over])
-    speeds = model.inverse(t).speeds
-    peak = np.max(np.abs(speeds), axis=-1)
-    limit = _per_robot(model.max_wheel_speed_rad_s, m)
-    frac = np.broadcast_to(np.asarray(fraction, dtype=np.float64), (m,))
-    scale = np.where(peak > 0, frac * limit / np.where(peak > 0, peak, 1.0), 1.0)
-    return t * scale[:, None]
-
-
-def reachable_twists(model: Any, rng: np.random.Generator, m: int) -> np.ndarray:
-    """``m`` random reachable twists, about a quarter of them special cases (zero, pure
-    translation, turning on the spot, ...), each using 5 to 95 % of the wheel limit."""
-    t = rng.uniform(-1.0, 1.0, (m, 3))
-    special = rng.random(m) < 0.25
-    t[special] = _SPECIAL_TWISTS[rng.integers(0, len(_SPECIAL_TWISTS), int(special.sum()))]
-    return make_reachable(model, t, rng.uniform(0.05, 0.95, m))
 
 
 # ----------------------------------------------------------------------------- checker
@@ -306,54 +220,6 @@ def _check_declarations(c: _Checker, stack: int | None) -> None:
         )
 
 
-def _evaluate(model: Any, t: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
-    """Everything the properties look at, for twists ``t`` (m, 3); rows are robots."""
-    m = t.shape[0]
-    driven = list(model.driven_wheels)
-    ws = model.inverse(t)
-    drive = ws.speeds[:, driven]
-    limit = _per_robot(model.max_wheel_speed_rad_s, m)
-    max_angle, max_rate = _steer_limits(model, m)
-
-    # a twist beyond the limits, with the wheels already steered for it
-    peak = _driven_peak(model, ws.speeds)
-    factor = np.where(peak > 0, limit * rng.uniform(1.5, 10.0, m) / np.where(peak > 0, peak, 1), 0)
-    big = t * factor[:, None]
-    steer_now = ws.steering.copy() if model.has_steering else np.zeros(m)
-    cmd = big.copy()
-    if not model.holonomic:  # an unreachable sideways part, to be dropped
-        cmd[:, 1] += rng.normal(size=m)
-
-    # wheel commands, two thirds of them beyond the limit, and steering targets beyond +-max
-    wheel_cmd = rng.uniform(-3.0, 3.0, (m, len(driven))) * limit[:, None]
-    small = rng.random(m) < 0.3
-    wpeak = np.max(np.abs(wheel_cmd), axis=-1)
-    wheel_cmd[small] *= (rng.uniform(0.0, 1.0, m) * limit / np.where(wpeak > 0, wpeak, 1))[
-        small, None
-    ]
-    steer_from = rng.uniform(-1.0, 1.0, m) * max_angle
-    steer_target = rng.uniform(-2.0, 2.0, m) * np.where(model.has_steering, max_angle, 1.0)
-
-    return {
-        "twist": t,
-        "inverse": ws,
-        "forward": model.forward(drive, ws.steering),
-        "drive_for": model.drive_for(t, ws.steering),
-        "big": big,
-        "cmd": cmd,
-        "steer_now": steer_now,
-        "act_big": from_twist(model, cmd, steer_now, DT),
-        "act_within": from_twist(model, t, steer_now, DT),
-        "wheel_cmd": wheel_cmd,
-        "steer_from": steer_from,
-        "steer_target": steer_target,
-        "act_wheels": from_wheels(model, wheel_cmd, steer_target, steer_from, DT),
-        "limit": limit,
-        "max_angle": max_angle,
-        "max_rate": max_rate,
-    }
-
-
 def _check_round_trip(c: _Checker, t: np.ndarray, b: dict[str, Any]) -> None:
     model, ws = c.model, b["inverse"]
     m, w = t.shape[0], len(model.wheel_names)
@@ -392,240 +258,6 @@ def _check_round_trip(c: _Checker, t: np.ndarray, b: dict[str, Any]) -> None:
         inputs=inputs,
     )
     _check_no_side_slip(c, t, ws.speeds, ws.steer_angles, "wheels roll (inverse)", fixed=True)
-
-
-def _check_no_side_slip(
-    c: _Checker,
-    t: np.ndarray,
-    speeds: np.ndarray,
-    angles: np.ndarray,
-    prop: str,
-    *,
-    fixed: bool = False,
-) -> None:
-    """Wheels roll without side slip: the contact point of a steered wheel moves at
-    r * speed * (cos a, sin a) (not checked for the parallel-steering approximation); with
-    ``fixed``, so does every other wheel of a non-holonomic model (a fixed standard wheel
-    along the robot's x axis, a = 0)."""
-    model = c.model
-    m = t.shape[0]
-    wheels, heading = [], []
-    if model.has_steering and getattr(model, "steering_geometry", None) != "parallel":
-        wheels += list(model.steered_wheels)
-        heading.append(np.asarray(angles, dtype=np.float64).reshape(m, -1))
-    if fixed and not model.holonomic:
-        rest = [i for i in range(len(model.wheel_names)) if i not in model.steered_wheels]
-        wheels += rest
-        heading.append(np.zeros((m, len(rest))))
-    if not wheels:
-        return
-    a = np.concatenate(heading, axis=-1)
-    pos = np.broadcast_to(np.asarray(model.wheel_positions_m()), (m, len(model.wheel_names), 2))
-    px, py = pos[:, wheels, 0], pos[:, wheels, 1]
-    vx, vy, om = t[:, 0:1], t[:, 1:2], t[:, 2:3]
-    point_v = np.stack([vx - om * py, vy + om * px], axis=-1)
-    r = _per_robot(model.wheel_radius_m, m)[:, None]
-    s = speeds[:, wheels] * r
-    rolled = np.stack([s * np.cos(a), s * np.sin(a)], axis=-1)
-    names = ", ".join(model.wheel_names[i] for i in wheels)
-    c.close(
-        prop,
-        f"r * speed * (cos a, sin a) vs the contact-point velocity, wheels ({names}) as "
-        "(x, y) pairs",
-        rolled.reshape(m, -1),
-        point_v.reshape(m, -1),
-        rtol=RTOL,
-        inputs={"twist": t, "steer_angles": angles},
-    )
-
-
-def _check_actuation_common(c: _Checker, act: Actuation, m: int, prop: str, *, fixed: bool) -> None:
-    """Shapes and internal consistency of an Actuation; ``fixed``: also the rolling of fixed
-    wheels (not in forward mode, where e.g. Ackermann reports the commanded rear speeds even
-    when they disagree with the bicycle model)."""
-    model = c.model
-    c.shape(prop, "Actuation.twist", act.twist, (m, 3))
-    c.shape(prop, "Actuation.drive", act.drive, (m, len(model.driven_wheels)))
-    c.shape(prop, "Actuation.wheel_speeds", act.wheel_speeds, (m, len(model.wheel_names)))
-    c.shape(prop, "Actuation.steer_angles", act.steer_angles, (m, len(model.steered_wheels)))
-    c.shape(prop, "Actuation.steering", act.steering, (m,))
-    c.close(
-        prop,
-        "Actuation.wheel_speeds[:, driven_wheels] vs Actuation.drive",
-        act.wheel_speeds[:, list(model.driven_wheels)],
-        act.drive,
-        rtol=0,
-        atol=0,
-    )
-    c.close(
-        prop,
-        "Actuation.twist vs forward(Actuation.drive, Actuation.steering)",
-        act.twist,
-        model.forward(act.drive, act.steering),
-        rtol=BATCH_TOL,
-    )
-    if not model.has_steering:
-        c.close(
-            prop,
-            "Actuation.steering of a model without steering",
-            act.steering,
-            np.zeros(m),
-            rtol=0,
-            atol=0,
-        )
-    _check_no_side_slip(
-        c, act.twist, act.wheel_speeds, act.steer_angles, f"{prop}: wheels roll", fixed=fixed
-    )
-
-
-def _check_from_twist(c: _Checker, t: np.ndarray, b: dict[str, Any]) -> None:
-    model = c.model
-    m = t.shape[0]
-    prop = "from_twist saturation keeps direction"
-    act: Actuation = b["act_big"]
-    big = b["big"]
-    inputs = {"twist": big}
-    _check_actuation_common(c, act, m, prop, fixed=True)
-    c.within(prop, "driven wheel speed", act.drive, b["limit"], LIMIT_SLACK)
-    if not model.holonomic:
-        c.close(
-            prop,
-            "executed vy of a non-holonomic model",
-            act.twist[:, 1],
-            np.zeros(m),
-            rtol=0,
-            atol=0,
-        )
-    c.close(
-        prop,
-        "steering (already at its target)",
-        act.steering,
-        b["steer_now"],
-        rtol=0,
-        atol=BATCH_TOL,
-    )
-    norm_big = np.linalg.norm(big, axis=-1)
-    moving = norm_big > 0
-    if np.any(moving):
-        ex, bg = act.twist[moving], big[moving]
-        norm_ex = np.linalg.norm(ex, axis=-1)
-        c.require(bool(np.all(norm_ex > 0)), prop, "a moving command was executed as a stop")
-        c.close(
-            prop,
-            "executed twist / |executed twist| vs commanded / |commanded|",
-            ex / norm_ex[:, None],
-            bg / norm_big[moving, None],
-            rtol=0,
-            atol=RTOL,
-            inputs={"twist": bg},
-        )
-        scale = np.sum(ex * bg, axis=-1) / norm_big[moving] ** 2
-        c.require(
-            bool(np.all((scale > 0) & (scale <= 1 + RTOL))),
-            prop,
-            lambda: (
-                f"executed/commanded scale must be in (0, 1], got {scale.min()!r} .. "
-                f"{scale.max()!r}"
-            ),
-        )
-        c.close(
-            prop,
-            "peak driven wheel speed of a saturated twist vs the limit",
-            _driven_peak(model, act.wheel_speeds)[moving],
-            b["limit"][moving],
-            rtol=RTOL,
-        )
-
-    prop = "from_twist within the limits executes the twist"
-    act2: Actuation = b["act_within"]
-    _check_actuation_common(c, act2, m, prop, fixed=True)
-    c.close(prop, "executed twist", act2.twist, t, rtol=RTOL, inputs={"twist": t})
-    c.close(
-        prop,
-        "driven wheel speeds",
-        act2.drive,
-        b["inverse"].speeds[:, list(model.driven_wheels)],
-        rtol=RTOL,
-        inputs=inputs,
-    )
-
-
-def _check_from_wheels(c: _Checker, b: dict[str, Any]) -> None:
-    model = c.model
-    prop = "from_wheels saturation and steering limits"
-    act: Actuation = b["act_wheels"]
-    cmd = b["wheel_cmd"]
-    m = cmd.shape[0]
-    inputs = {"drive": cmd}
-    _check_actuation_common(c, act, m, prop, fixed=False)
-    limit = b["limit"]
-    peak = np.max(np.abs(cmd), axis=-1)
-    scale = np.where(peak > limit, limit / np.where(peak > 0, peak, 1.0), 1.0)
-    c.within(prop, "driven wheel speed", act.drive, limit, LIMIT_SLACK)
-    c.close(
-        prop,
-        "saturated drive (one factor per robot: ratios kept)",
-        act.drive,
-        cmd * scale[:, None],
-        rtol=BATCH_TOL,
-        inputs=inputs,
-    )
-    sat = peak > limit
-    c.close(
-        prop,
-        "peak of a saturated drive vs the limit",
-        np.max(np.abs(act.drive), axis=-1)[sat],
-        limit[sat],
-        rtol=BATCH_TOL,
-    )
-    if model.has_steering:
-        now, max_angle, step = b["steer_from"], b["max_angle"], b["max_rate"] * DT
-        c.within(prop, "steering", act.steering, max_angle, 1e-12)
-        c.within(prop, "steering change in one call", act.steering - now, step, 1e-12)
-        goal = np.clip(b["steer_target"], -max_angle, max_angle)
-        want = now + np.clip(goal - now, -step, step)
-        c.close(
-            prop,
-            "steering after one call (towards the clamped target)",
-            act.steering,
-            want,
-            rtol=0,
-            atol=1e-12,
-            inputs={"target": b["steer_target"], "now": now},
-        )
-
-
-def _check_steering_sequence(c: _Checker, rng: np.random.Generator, m: int) -> None:
-    """Repeated from_wheels calls walk the steering to the clamped target, one rate step each."""
-    model = c.model
-    if not model.has_steering:
-        return
-    prop = "from_wheels steering rate limit"
-    max_angle, rate = _steer_limits(model, m)
-    now = rng.uniform(-1.0, 1.0, m) * max_angle
-    target = rng.uniform(-2.0, 2.0, m) * max_angle
-    goal = np.clip(target, -max_angle, max_angle)
-    drive = np.zeros((m, len(model.driven_wheels)))
-    steps = int(np.max(np.ceil(np.abs(goal - now) / (rate * DT)))) + 1
-    for _ in range(min(steps, 10_000)):
-        new = from_wheels(model, drive, target, now, DT).steering
-        c.within(prop, "steering change in one call", new - now, rate * DT, 1e-12)
-        c.within(prop, "steering", new, max_angle, 1e-12)
-        c.require(
-            bool(np.all(np.abs(goal - new) <= np.abs(goal - now) + 1e-12)),
-            prop,
-            "steering moved away from its target",
-        )
-        now = new
-    c.close(
-        prop,
-        "steering after enough calls vs the clamped target",
-        now,
-        goal,
-        rtol=0,
-        atol=1e-12,
-        inputs={"target": target},
-    )
 
 
 def _check_batch_consistency(c: _Checker, stack: int | None, b: dict[str, Any]) -> None:

@@ -39,8 +39,13 @@ class Tricycle:
 
     def __post_init__(self) -> None:
         check_positive(
-            self, "wheel_radius_m", "wheelbase_m", "half_track_m", "max_wheel_speed_rad_s",
-            "max_steer_rad", "max_steer_rate_rad_s",
+            self,
+            "wheel_radius_m",
+            "wheelbase_m",
+            "half_track_m",
+            "max_wheel_speed_rad_s",
+            "max_steer_rad",
+            "max_steer_rate_rad_s",
         )
 
     def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray:

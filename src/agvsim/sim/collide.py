@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from agvsim.sensors.raycast import bin_window, box_tables, build_center_bins
+from agvsim.geometry import bin_window, box_tables, build_center_bins
 from agvsim.world.grid import OccupancyGrid
 
 

@@ -25,12 +25,13 @@ from agvsim.control.api import (
     WheelCommand,
     command_to_array,
 )
+from agvsim.geometry import box_tables
 from agvsim.kinematics import actuation
 from agvsim.kinematics.base import integrate_se2, stack_models
 from agvsim.sensors.range_sensor import apply_noise
-from agvsim.sensors.raycast import RayCaster, box_tables
+from agvsim.sensors.raycast import RayCaster
 from agvsim.sim.collide import Collider
-from agvsim.sim.kernels import move_bodies
+from agvsim.sim.kernels import move_bodies, pair_faults
 from agvsim.sim.spec import ControlMode, RobotSpec, World
 from agvsim.sim.state import SensorTable, SimState  # noqa: F401 - SensorTable in hints
 
@@ -318,14 +319,20 @@ class Simulation:
             self.world.boxes,
             self._static_tab,
         )
-        # robots against robots: undo both moves of every overlapping pair until none is left
+        # robots against robots: where two new footprints overlap, undo the move of each robot
+        # that ran into the other's old place (both, if neither did), until none is left
+        old_boxes = None
         for _ in range(self.n):
             pairs = self.collider.overlapping_pairs(boxes)
             if len(pairs) == 0:
                 break
-            involved = np.unique(pairs)
-            moved = involved[np.any(good[involved] != start[involved], axis=1)]
-            bump[involved] = True
+            if old_boxes is None:
+                old_boxes = self.footprints(start)
+            fault = pair_faults(boxes, old_boxes, pairs)
+            fault[~fault.any(axis=1)] = True
+            culprits = np.unique(pairs[fault])
+            bump[np.unique(pairs)] = True
+            moved = culprits[np.any(good[culprits] != start[culprits], axis=1)]
             if moved.size == 0:
                 break
             good[moved] = start[moved]

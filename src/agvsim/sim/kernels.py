@@ -7,18 +7,15 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from agvsim.geometry import snap_axis
 from agvsim.kinematics.base import se2_step
 from agvsim.sim.collide import _box_hits_grid, rects_overlap
 
 
 @njit(cache=True, error_model="numpy")
 def _blocked(grid_bu, res, ox, oy, x, y, th, off, hl, hw, static, static_tab) -> bool:
-    c, s = math.cos(th), math.sin(th)
     # snap near-axis headings like the collision module does, so square bodies touch exactly
-    if abs(c) < 1e-12:
-        c, s = 0.0, math.copysign(1.0, s)
-    elif abs(s) < 1e-12:
-        c, s = math.copysign(1.0, c), 0.0
+    c, s = snap_axis(math.cos(th), math.sin(th))
     cx, cy = x + c * off, y + s * off
     if _box_hits_grid(grid_bu, res, ox, oy, cx, cy, c, s, hl, hw):
         return True
@@ -230,3 +227,34 @@ def move_bodies(
         boxes,
     )
     return out, bump, dist, boxes
+
+
+@njit(cache=True, error_model="numpy")
+def _box_overlap(a, b) -> bool:
+    return rects_overlap(
+        a[0],
+        a[1],
+        math.cos(a[2]),
+        math.sin(a[2]),
+        a[3],
+        a[4],
+        b[0],
+        b[1],
+        math.cos(b[2]),
+        math.sin(b[2]),
+        b[3],
+        b[4],
+    )
+
+
+@njit(cache=True)
+def pair_faults(new_boxes: np.ndarray, old_boxes: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """For each overlapping pair (i, j) of new footprints: ``(P, 2)`` bool, whether i's move
+    ran into j's old place and whether j's ran into i's. A robot that did not run into the
+    other one may keep its move (it may be backing away)."""
+    out = np.zeros((pairs.shape[0], 2), dtype=np.bool_)
+    for k in range(pairs.shape[0]):
+        i, j = pairs[k, 0], pairs[k, 1]
+        out[k, 0] = _box_overlap(new_boxes[i], old_boxes[j])
+        out[k, 1] = _box_overlap(new_boxes[j], old_boxes[i])
+    return out

@@ -18,7 +18,7 @@ def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = 
     grid = sim.world.grid
     xmin, xmax, ymin, ymax = grid.extent_m
     aspect = (ymax - ymin) / max(xmax - xmin, 1e-9)
-    fig, ax = plt.subplots(figsize=(8, max(3.0, min(12.0, 8 * aspect)) + 0.6), dpi=110)
+    fig, ax = plt.subplots(figsize=(9.5, max(3.0, min(12.0, 8 * aspect)) + 0.6), dpi=110)
     ax.imshow(
         grid.occupied,
         cmap="Greys",
@@ -65,9 +65,9 @@ def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = 
     ax.set_ylabel("y [m] (north)")
     ax.set_title(title or f"t = {st.t_s:.1f} s")
     if sim.robots:
-        ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, bbox_inches="tight")
     plt.close(fig)
 
 

@@ -8,11 +8,12 @@ Bad user input raises :class:`MapFormatError` (a ``ValueError``) whose message n
 (file path or ``"inline matrix"``), the place (line / row / field / key), the bad value and what
 is allowed. Pillow and PyYAML are imported only by the functions that need them, so the
 simulation core can use :func:`grid_from_matrix` and :func:`parse_text_picture` without them.
+ROS ``map_server`` maps are in :mod:`agvsim.world.ros_map`; ``load_ros_map`` and
+``save_ros_map`` stay importable from here, and :func:`load_map` reads ``.yaml``/``.yml`` maps.
 """
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,15 +27,12 @@ WALL_CHAR, FREE_CHAR = "#", "."
 TEXT_EXTENSIONS = (".txt", ".map")
 CSV_EXTENSIONS = (".csv",)
 IMAGE_EXTENSIONS = (".png", ".pgm", ".ppm", ".pbm", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff")
-ROS_EXTENSIONS = (".yaml", ".yml")
-ROS_REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
-ROS_MODES = ("trinary", "scale", "raw")
-_ROS_OCCUPIED_PIXEL, _ROS_FREE_PIXEL = 0, 254  # what map_saver writes (unknown would be 205)
+ROS_EXTENSIONS = (".yaml", ".yml")  # read by agvsim.world.ros_map
+_ROS_OCCUPIED_PIXEL = 0  # walls in saved images, as ROS map_saver writes them
 
 _A_MATRIX = "a non-empty list of equal-length rows of 0/1"
 _A_PICTURE = f"lines of '{WALL_CHAR}' (wall) and '{FREE_CHAR}' (free), all the same width"
 _A_CSV = "lines of 0/1 separated by commas, all with the same number of fields"
-_A_ROS = "a map_server YAML with keys " + ", ".join(ROS_REQUIRED_KEYS)
 _A_FRACTION = "a number in [0, 1]"
 
 
@@ -310,97 +308,6 @@ def load_image(
     return _make_grid(lightness < threshold, resolution_m, origin_xy_m, str(p))
 
 
-# ---------------------------------------------------------------------------------- ROS maps
-def _ros_key(doc: dict[str, Any], key: str, source: str) -> Any:
-    if key not in doc:
-        close = difflib.get_close_matches(key, [str(k) for k in doc], n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise _err(source, f"key '{key}'", f"missing{hint}", _A_ROS)
-    return doc[key]
-
-
-def _ros_number(value: Any, source: str, key: str, allowed: str) -> float:
-    if isinstance(value, str):
-        try:
-            value = float(value)  # yaml-cpp reads '1e-05' as a number; PyYAML as a string
-        except ValueError:
-            pass
-    if not (_is_real(value) and math.isfinite(value)):
-        raise _err(source, f"key '{key}'", f"{value!r} is not allowed", allowed)
-    return float(value)
-
-
-def _read_ros_yaml(p: Path) -> dict[str, Any]:
-    import yaml
-
-    try:
-        doc = yaml.safe_load(_read_text(p))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark is not None else None
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise _err(str(p), where, f"not valid YAML ({problem})", _A_ROS) from exc
-    if not isinstance(doc, dict):
-        raise _err(str(p), None, f"top level is a {type(doc).__name__}, not a mapping", _A_ROS)
-    return doc
-
-
-def load_ros_map(yaml_path: str | Path, unknown_is_occupied: bool = True) -> OccupancyGrid:
-    """Read a ROS ``map_server`` map (YAML + image); resolution and origin come from the YAML.
-
-    Keys: ``image`` (path, relative to the YAML file), ``resolution`` (m/pixel), ``origin``
-    ([x, y, yaw]: world pose of the lower-left pixel's corner, in metres / rad; yaw must be 0),
-    ``negate`` (0/1), ``occupied_thresh``, ``free_thresh`` and optional ``mode`` (trinary,
-    scale, raw; default trinary). Other keys are ignored.
-
-    Trinary/scale rule of map_server: ``p = (255 - v) / 255`` (``v / 255`` with negate), where
-    v is the mean of the colour channels; ``p > occupied_thresh`` is occupied,
-    ``p < free_thresh`` free, anything else unknown (scale's in-between values included).
-    Raw mode reads v (after negate) as percent occupancy; ``v > 100`` is unknown.
-    Unknown cells are walls when ``unknown_is_occupied`` (default), free otherwise.
-    """
-    p = _require_file(yaml_path)
-    src, doc = str(p), _read_ros_yaml(p)
-    image = _ros_key(doc, "image", src)
-    if not isinstance(image, str) or not image.strip():
-        raise _err(src, "key 'image'", f"{image!r} is not allowed", "an image file path")
-    res = _ros_number(_ros_key(doc, "resolution", src), src, "resolution", "metres per pixel > 0")
-    if res <= 0:
-        raise _err(src, "key 'resolution'", f"{res!r} is not allowed", "metres per pixel > 0")
-    origin = _ros_key(doc, "origin", src)
-    if not isinstance(origin, list) or len(origin) != 3:
-        raise _err(src, "key 'origin'", f"{origin!r} is not allowed", "[x, y, yaw]")
-    ox, oy, yaw = (_ros_number(v, src, "origin", "[x, y, yaw], three numbers") for v in origin)
-    if yaw != 0.0:
-        problem = f"yaw {yaw!r} rad is not supported"
-        raise _err(src, "key 'origin'", problem, "yaw 0; rotate the image instead")
-    negate = _ros_key(doc, "negate", src)
-    if isinstance(negate, float) or negate not in (0, 1):
-        raise _err(src, "key 'negate'", f"{negate!r} is not allowed", "0 or 1")
-    occ_th = _fraction(_ros_key(doc, "occupied_thresh", src), src, "key 'occupied_thresh'")
-    free_th = _fraction(_ros_key(doc, "free_thresh", src), src, "key 'free_thresh'")
-    if free_th > occ_th:
-        problem = f"{free_th!r} is above occupied_thresh {occ_th!r}"
-        raise _err(src, "key 'free_thresh'", problem, "free_thresh <= occupied_thresh")
-    mode = doc.get("mode", "trinary")
-    if mode not in ROS_MODES:
-        raise _err(src, "key 'mode'", f"{mode!r} is not allowed", ", ".join(ROS_MODES))
-
-    image_path = Path(image) if Path(image).is_absolute() else p.parent / image
-    if not image_path.is_file():
-        problem = f"image file {str(image_path)!r} not found"
-        raise _err(src, "key 'image'", problem, "an existing image, relative to the YAML file")
-    grey = _read_grey(image_path, f"{image_path} (image of {src})")
-    if mode == "raw":
-        value = 255.0 - grey if negate else grey
-        known, p_occ = value <= 100.0, value / 100.0
-    else:
-        known, p_occ = np.ones(grey.shape, bool), (grey if negate else 255.0 - grey) / 255.0
-    occupied, free = known & (p_occ > occ_th), known & (p_occ < free_th)
-    walls = ~free if unknown_is_occupied else occupied
-    return _make_grid(walls, res, (ox, oy), src)
-
-
 # ---------------------------------------------------------------------------------- dispatch
 def load_map(
     path: str | Path,
@@ -420,6 +327,8 @@ def load_map(
         if resolution_m is not None or origin_xy_m is not None:
             problem = "a ROS map sets its own resolution and origin"
             raise _err(str(p), "resolution_m/origin_xy_m", problem, "leave both unset (None)")
+        from agvsim.world.ros_map import load_ros_map  # imports this module: not at the top
+
         return load_ros_map(p)
     res = 1.0 if resolution_m is None else resolution_m
     if ext in TEXT_EXTENSIONS:
@@ -462,28 +371,15 @@ def save_png(grid: OccupancyGrid, path: str | Path) -> Path:
     return p
 
 
-def save_ros_map(grid: OccupancyGrid, yaml_path: str | Path) -> Path:
-    """Write ``grid`` as a ROS map: ``<stem>.pgm`` (occupied 0, free 254) beside the YAML.
+# ---------------------------------------------------------------------------------- ROS maps
+_ROS_MAP_NAMES = ("ROS_MODES", "ROS_REQUIRED_KEYS", "load_ros_map", "save_ros_map")
 
-    The YAML holds ``resolution`` (m/pixel), ``origin`` [x, y, 0] = ``grid.origin_xy_m`` (the
-    lower-left corner, ROS semantics), negate 0, occupied_thresh 0.65, free_thresh 0.196 and
-    mode trinary, so :func:`load_ros_map` reads back the same grid exactly. Returns the YAML path.
-    """
-    import yaml
 
-    yp = Path(yaml_path)
-    if yp.suffix.lower() not in ROS_EXTENSIONS:
-        problem = f"{yp.suffix or '(none)'!r} is not allowed"
-        raise _err(str(yp), "extension", problem, " ".join(ROS_EXTENSIONS))
-    _save_grey(grid, yp.with_suffix(".pgm"), _ROS_FREE_PIXEL, "PPM")
-    doc = {
-        "image": yp.with_suffix(".pgm").name,
-        "mode": "trinary",
-        "resolution": float(grid.resolution_m),
-        "origin": [float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1]), 0.0],
-        "negate": 0,
-        "occupied_thresh": 0.65,
-        "free_thresh": 0.196,
-    }
-    yp.write_text(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None), encoding="utf-8")
-    return yp
+def __getattr__(name: str) -> Any:
+    """``loaders.load_ros_map`` and the other ROS map names, from :mod:`agvsim.world.ros_map`
+    (imported on first use rather than here, because it imports this module)."""
+    if name in _ROS_MAP_NAMES:
+        from agvsim.world import ros_map
+
+        return getattr(ros_map, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
