@@ -216,3 +216,20 @@ def test_nan_command_is_refused_clearly():
     sim = Simulation(arena(), [robot("bob")], [Binding(lambda o: (np.nan, 0.0, 0.0), (0,))])
     with pytest.raises(ControllerError, match="bob.*finite"):
         sim.step()
+
+
+def test_wall_and_robot_collisions_are_told_apart():
+    # a drives into b (standing still) and stops; b never moves but is bumped into
+    sim = Simulation(
+        arena(),
+        [robot("a", pose=(-2.0, 0.0, 0.0)), robot("b", pose=(0.0, 0.0, 0.0))],
+        [
+            Binding(lambda obs: Twist(0.5, 0.0, 0.0) if obs.name == "a" else Twist(), (0,)),
+            Binding(lambda obs: Twist(), (1,)),
+        ],
+    )
+    sim.run(5.0)
+    st = sim.state
+    assert st.robot_collisions.tolist() == [1, 1] and st.wall_collisions.tolist() == [0, 0]
+    assert sim.state.poses[1, 0] == 0.0  # the one standing still was not moved
+    assert 0.6 - 1e-9 <= st.poses[1, 0] - st.poses[0, 0] < 0.62

@@ -70,7 +70,8 @@ def run(
         disable=quiet,
         transient=False,
     )
-    task = progress.add_task("run", total=1.0, t="")
+    # before the first tick the kernels load (a first run compiles them: ~15 s, once)
+    task = progress.add_task("run", total=1.0, t="preparing (first run compiles kernels)")
 
     def tick(t: float, total: float) -> None:
         progress.update(task, completed=t / total, t=f"{t:7.1f} / {total:.1f} s")
@@ -96,7 +97,8 @@ def run(
         p = rb["final_pose"]
         out.print(
             f"  {rb['name']:<12} {rb['model']:<12} distance {rb['distance_m']:7.2f} m  "
-            f"collisions {rb['collisions']:3d}  final ({p['x_m']:.2f}, {p['y_m']:.2f}, "
+            f"collisions {rb['wall_collisions']:2d} wall {rb['robot_collisions']:2d} robot  "
+            f"final ({p['x_m']:.2f}, {p['y_m']:.2f}, "
             f"{p['theta_rad']:.2f} rad)"
         )
     out.print(

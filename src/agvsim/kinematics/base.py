@@ -77,11 +77,10 @@ def saturation_scale(speeds: np.ndarray, max_speed: np.ndarray | float) -> np.nd
     """Per-robot factor in (0, 1] that brings every wheel speed of ``speeds (N, W)`` within
     ``max_speed`` rad/s. Scaling all wheels of a robot by one factor keeps the direction of
     the commanded motion (the twist is linear in the wheel speeds)."""
-    peak = np.max(np.abs(speeds), axis=-1) if speeds.shape[-1] else np.zeros(speeds.shape[:-1])
-    limit = np.broadcast_to(np.asarray(max_speed, dtype=np.float64), peak.shape)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(peak > limit, limit / np.where(peak > 0, peak, 1.0), 1.0)
-    return scale
+    if speeds.shape[-1] == 0:
+        return np.ones(speeds.shape[:-1])
+    peak = np.abs(speeds).max(axis=-1)
+    return np.minimum(1.0, max_speed / np.maximum(peak, 1e-300))
 
 
 def wheel_heading(px: np.ndarray | float, py: np.ndarray | float, twists: np.ndarray):

@@ -76,6 +76,8 @@ def summary(sim: Simulation, wall_s: float, extra: dict[str, Any] | None = None)
                 "wheel_names": list(r.model.wheel_names),
                 "distance_m": round(float(st.distance_m[i]), 6),
                 "collisions": int(st.collisions[i]),
+                "wall_collisions": int(st.wall_collisions[i]),
+                "robot_collisions": int(st.robot_collisions[i]),
                 "final_pose": {"x_m": float(p[0]), "y_m": float(p[1]), "theta_rad": float(p[2])},
                 "odometry_final_pose": {
                     "x_m": float(o[0]),

@@ -251,17 +251,24 @@ _INPUT_ERRORS = (
 
 @njit(cache=True, error_model="numpy")
 def _check_inputs(origins, beam_angles, max_range, boxes, ignore_box) -> int:
-    """0 if the inputs are valid, else 1 + the index of the first broken rule in _INPUT_ERRORS."""
-    if not np.all(np.isfinite(origins)):
-        return 1
-    if np.any(np.isinf(beam_angles)):
-        return 2
-    if not np.all((max_range > 0.0) & np.isfinite(max_range)):
-        return 3
-    if not np.all(np.isfinite(boxes)) or np.any(boxes[:, 3:] < 0.0):
-        return 4
-    if np.any((ignore_box < -1) | (ignore_box >= boxes.shape[0])):
-        return 5
+    """0 if the inputs are valid, else 1 + the index of the first broken rule in _INPUT_ERRORS.
+    Plain loops: no temporary arrays on the hot path."""
+    for v in origins.ravel():
+        if not math.isfinite(v):
+            return 1
+    for v in beam_angles.ravel():
+        if math.isinf(v):
+            return 2
+    for v in max_range:
+        if not (v > 0.0 and math.isfinite(v)):
+            return 3
+    for j in range(boxes.shape[0]):
+        for k in range(5):
+            if not math.isfinite(boxes[j, k]) or (k >= 3 and boxes[j, k] < 0.0):
+                return 4
+    for v in ignore_box:
+        if v < -1 or v >= boxes.shape[0]:
+            return 5
     return 0
 
 

@@ -158,12 +158,15 @@ def _pairs_of(i, boxes, tab, start, items, geom, dst, at):
 @njit(cache=True, error_model="numpy")
 def box_pairs_overlapping(boxes):
     """``(P, 2)`` int64: every pair ``i < j`` of ``boxes (N, 5)`` that overlap, sorted by
-    ``(i, j)``. Broad phase: bins of box centres 2 x the largest bounding radius wide."""
+    ``(i, j)``. Broad phase: bins of box centres (see below), a 3 x 3 window of bins each."""
     n = boxes.shape[0]
     if n < 2:
         return np.zeros((0, 2), dtype=np.int64)
     tab = box_tables(boxes)
-    start, items, geom = build_center_bins(boxes, 2.0 * tab[:, 2].max())
+    # bins at least 2 bounding radii wide (a 3 x 3 window then finds every partner), and
+    # wide enough that there are about as many bins as boxes: few empty bins to clear
+    span = max(boxes[:, 0].max() - boxes[:, 0].min(), boxes[:, 1].max() - boxes[:, 1].min())
+    start, items, geom = build_center_bins(boxes, max(2.0 * tab[:, 2].max(), span / math.sqrt(n)))
     dummy = np.empty((0, 2), dtype=np.int64)
     m = 0
     for i in range(n):  # count first, so the output is allocated once

@@ -27,10 +27,10 @@ from agvsim.control.api import (
 )
 from agvsim.geometry import box_tables
 from agvsim.kinematics import actuation
-from agvsim.kinematics.base import integrate_se2, stack_models
+from agvsim.kinematics.base import _integrate_rows, stack_models
 from agvsim.sensors.range_sensor import apply_noise
 from agvsim.sensors.raycast import RayCaster
-from agvsim.sim.collide import Collider
+from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.kernels import move_bodies, pair_faults
 from agvsim.sim.spec import ControlMode, RobotSpec, World
 from agvsim.sim.state import SensorTable, SimState  # noqa: F401 - SensorTable in hints
@@ -305,7 +305,7 @@ class Simulation:
         sweep = (np.hypot(twist[:, 0], twist[:, 1]) + np.abs(twist[:, 2]) * self._radius) * dt
         n_sub = max(1, int(np.ceil(sweep.max() / self._substep_len)))
         grid = self.world.grid
-        good, bump, dist, boxes = move_bodies(
+        good, bump_wall, dist, boxes = move_bodies(
             grid.cells_bu,
             grid.resolution_m,
             grid.origin_xy_m[0],
@@ -322,8 +322,9 @@ class Simulation:
         # robots against robots: where two new footprints overlap, undo the move of each robot
         # that ran into the other's old place (both, if neither did), until none is left
         old_boxes = None
+        bump_robot = np.zeros(self.n, dtype=bool)
         for _ in range(self.n):
-            pairs = self.collider.overlapping_pairs(boxes)
+            pairs = box_pairs_overlapping(boxes)  # our own footprints: no input checks
             if len(pairs) == 0:
                 break
             if old_boxes is None:
@@ -331,15 +332,18 @@ class Simulation:
             fault = pair_faults(boxes, old_boxes, pairs)
             fault[~fault.any(axis=1)] = True
             culprits = np.unique(pairs[fault])
-            bump[np.unique(pairs)] = True
+            bump_robot[np.unique(pairs)] = True
             moved = culprits[np.any(good[culprits] != start[culprits], axis=1)]
             if moved.size == 0:
                 break
             good[moved] = start[moved]
             dist[moved] = 0.0
             boxes = self.footprints(good)
+        bump = bump_wall | bump_robot
         st.collisions += bump & ~st.bump
-        st.bump = bump
+        st.wall_collisions += bump_wall & ~st.bump_wall
+        st.robot_collisions += bump_robot & ~st.bump_robot
+        st.bump, st.bump_wall, st.bump_robot = bump, bump_wall, bump_robot
         st.distance_m += dist
         twist[bump] = 0.0
         st.wheel_speeds[bump] = 0.0
@@ -361,7 +365,9 @@ class Simulation:
             if g.steer_noise is not None:
                 steer = steer + g.steer_noise * rng.standard_normal(steer.shape)
             odo_twist = g.model.forward(drive, steer)
-            st.odom_poses[sel] = integrate_se2(st.odom_poses[sel], odo_twist, self.dt_s)
+            poses = np.ascontiguousarray(st.odom_poses[sel])
+            _integrate_rows(poses, odo_twist, self.dt_s, poses)  # in place, row by row
+            st.odom_poses[sel] = poses
 
     def _sense(self, force: bool = False) -> None:
         """Cast every sensor that is due now, for all robots, in one kernel call."""
@@ -436,7 +442,10 @@ class Simulation:
         key = idx.tobytes()
         if key not in self._batch_slots:  # which sensor slots each name maps to, once
             self._batch_slots[key] = {
-                name: np.array([tab.slot(int(i), name) for i in idx])
+                name: (
+                    _rows(slots := np.array([tab.slot(int(i), name) for i in idx])),
+                    tab.specs[int(slots[0])].num_beams,
+                )
                 for name in tab.common_names(idx)
             }
         ranges = _LazyRanges(st.scans, self._batch_slots[key], tab)
@@ -456,6 +465,13 @@ class Simulation:
         raise KeyError(f"no robot named {name!r}; robots: {[r.name for r in self.robots]}")
 
 
+def _rows(slots: np.ndarray) -> slice | np.ndarray:
+    """Consecutive slots as a slice (their rows are then a view, not a copy)."""
+    if np.all(np.diff(slots) == 1):
+        return slice(int(slots[0]), int(slots[-1]) + 1)
+    return slots
+
+
 class _LazyRanges(Mapping):
     """sensor name -> (k, B) readings, gathered only when a controller asks for them."""
 
@@ -463,12 +479,11 @@ class _LazyRanges(Mapping):
         self._scans, self._slots, self._tab = scans, slots, tab
 
     def __getitem__(self, name: str) -> np.ndarray:
-        slots = self._slots[name]
-        width = self._tab.specs[int(slots[0])].num_beams
-        lo, hi = int(slots[0]), int(slots[-1])
-        if hi - lo + 1 == len(slots) and np.all(np.diff(slots) == 1):
-            return self._scans[lo : hi + 1, :width]  # consecutive slots: a view, no copy
-        return self._scans[slots, :width]
+        rows, width = self._slots[name]
+        return self._scans[rows, :width]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._slots
 
     def __iter__(self):
         return iter(self._slots)

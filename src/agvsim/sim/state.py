@@ -109,7 +109,11 @@ class SimState:
     steer_angles: np.ndarray  # (N, S_max) rad, each steered wheel
     odom_poses: np.ndarray  # (N, 3) dead-reckoned from wheel encoders
     bump: np.ndarray  # (N,) bool: collided in the last step
+    bump_wall: np.ndarray  # (N,) bool: the bump was against a wall, the map edge or a box
+    bump_robot: np.ndarray  # (N,) bool: the bump was against another robot
     collisions: np.ndarray  # (N,) int: collision events (a bump after a free step)
+    wall_collisions: np.ndarray  # (N,) int: events against walls, the map edge or boxes
+    robot_collisions: np.ndarray  # (N,) int: events against other robots
     distance_m: np.ndarray  # (N,) travelled
     stopped: np.ndarray  # (N,) bool: taken out of the run (e.g. its controller failed)
     scans: np.ndarray  # (S, B_max) latest readings per sensor slot
@@ -132,7 +136,11 @@ class SimState:
             steer_angles=np.zeros((n, s_max)),
             odom_poses=poses.copy(),
             bump=np.zeros(n, dtype=bool),
+            bump_wall=np.zeros(n, dtype=bool),
+            bump_robot=np.zeros(n, dtype=bool),
             collisions=np.zeros(n, dtype=np.int64),
+            wall_collisions=np.zeros(n, dtype=np.int64),
+            robot_collisions=np.zeros(n, dtype=np.int64),
             distance_m=np.zeros(n),
             stopped=np.zeros(n, dtype=bool),
             scans=np.full((s, b), np.inf),
