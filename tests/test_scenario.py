@@ -70,7 +70,7 @@ CASES = [
     (
         "unknown_model.yaml",
         r"robots\[0\]\.model\b",
-        ["got 'diferential'", "'differential'", "'tricycle'", "'ackermann'", "'omni3'"],
+        ["'diferential' is not allowed", "did you mean 'differential'?", "tricycle, ackermann"],
     ),
     (
         "unknown_controller_type.yaml",
@@ -122,7 +122,11 @@ CASES = [
     ("invalid_yaml.yaml", r"\bline 4\b", ["not valid YAML"]),
     (MISSING, re.escape(MISSING), ["no such file"]),
     ("missing_map_file.yaml", r"\bworld\b", ["no_such_map.png", "file not found"]),
-    ("unknown_maze.yaml", r"\bworld\.maze\b", ["'thesis_fig16'", "'thesis_c1'", "'thesis_c2'"]),
+    (
+        "unknown_maze.yaml",
+        r"\bworld\.maze\b",
+        ["'thesis_c2' is not allowed", "did you mean 'thesis_c1'?", "thesis_fig16"],
+    ),
     (
         "bad_matrix_value.yaml",
         r"\bworld\b",

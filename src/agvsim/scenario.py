@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import importlib.util
+import re
 from dataclasses import fields as dc_fields
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -276,6 +277,11 @@ def _format_errors(err: ValidationError) -> list[str]:
             out.append(
                 f"{where}: unknown key {key!r}" + _did_you_mean(key, _fields_at(Scenario, loc))
             )
+        elif e["type"] == "literal_error" and isinstance(e.get("input"), str):
+            opts = re.findall(r"'([^']*)'", str(e.get("ctx", {}).get("expected", "")))
+            close = difflib.get_close_matches(e["input"], opts, n=1, cutoff=0.6)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            out.append(f"{where}: {e['input']!r} is not allowed{hint} (allowed: {', '.join(opts)})")
         elif e["type"] == "missing":
             out.append(f"{where}: required field is missing")
         elif e["type"] == "union_tag_invalid":
