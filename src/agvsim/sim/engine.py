@@ -304,12 +304,8 @@ class Simulation:
         start = st.poses
         sweep = (np.hypot(twist[:, 0], twist[:, 1]) + np.abs(twist[:, 2]) * self._radius) * dt
         n_sub = max(1, int(np.ceil(sweep.max() / self._substep_len)))
-        grid = self.world.grid
         good, bump_wall, dist, boxes = move_bodies(
-            grid.cells_bu,
-            grid.resolution_m,
-            grid.origin_xy_m[0],
-            grid.origin_xy_m[1],
+            self.world.grid,
             start,
             twist,
             dt,

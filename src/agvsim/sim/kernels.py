@@ -10,56 +10,35 @@ from numba import njit, prange
 from agvsim.geometry import snap_axis
 from agvsim.kinematics.base import se2_step
 from agvsim.sim.collide import _box_hits_grid, rects_overlap
+from agvsim.world.grid import OccupancyGrid
 
 
 @njit(cache=True, error_model="numpy")
-def _blocked(grid_bu, res, ox, oy, x, y, th, off, hl, hw, static, static_tab) -> bool:
+def _blocked(world, x, y, th, off, hl, hw) -> bool:
+    """Would a body (centre ``off`` ahead of pose x, y, th; half sizes hl, hw) overlap a wall,
+    leave the map or overlap a static box? ``world = (grid_bu, res, ox, oy, static, tab)``."""
+    grid_bu, res, ox, oy, static, tab = world
     # snap near-axis headings like the collision module does, so square bodies touch exactly
     c, s = snap_axis(math.cos(th), math.sin(th))
     cx, cy = x + c * off, y + s * off
     if _box_hits_grid(grid_bu, res, ox, oy, cx, cy, c, s, hl, hw):
         return True
     for j in range(static.shape[0]):
-        dx, dy = static[j, 0] - cx, static[j, 1] - cy
-        r = static_tab[j, 2] + math.hypot(hl, hw)
+        b = static[j]
+        dx, dy = b[0] - cx, b[1] - cy
+        r = tab[j, 2] + math.hypot(hl, hw)
         if dx * dx + dy * dy < r * r and rects_overlap(
-            cx,
-            cy,
-            c,
-            s,
-            hl,
-            hw,
-            static[j, 0],
-            static[j, 1],
-            static_tab[j, 0],
-            static_tab[j, 1],
-            static[j, 3],
-            static[j, 4],
+            cx, cy, c, s, hl, hw, b[0], b[1], tab[j, 0], tab[j, 1], b[3], b[4]
         ):
             return True
     return False
 
 
 @njit(cache=True, error_model="numpy")
-def _move_one(
-    i,
-    grid_bu,
-    res,
-    ox,
-    oy,
-    poses,
-    twists,
-    dt,
-    n_sub,
-    offset,
-    half,
-    static,
-    static_tab,
-    out,
-    bump,
-    dist,
-    boxes,
-):
+def _move_one(i, world, poses, twists, dt, n_sub, body, outs):
+    """Move body i; ``body = (offset, half)``, ``outs = (poses, bump, dist, boxes)``."""
+    offset, half = body
+    out, bump, dist, boxes = outs
     x, y, th = poses[i, 0], poses[i, 1], poses[i, 2]
     out[i, 0], out[i, 1], out[i, 2] = x, y, th
     bump[i] = False
@@ -68,20 +47,7 @@ def _move_one(
     if not (vx == 0.0 and vy == 0.0 and w == 0.0):
         for k in range(1, n_sub + 1):
             nx, ny, nth = se2_step(x, y, th, vx, vy, w, dt * k / n_sub)
-            if _blocked(
-                grid_bu,
-                res,
-                ox,
-                oy,
-                nx,
-                ny,
-                nth,
-                offset[i],
-                half[i, 0],
-                half[i, 1],
-                static,
-                static_tab,
-            ):
+            if _blocked(world, nx, ny, nth, offset[i], half[i, 0], half[i, 1]):
                 bump[i] = True
                 break
             out[i, 0], out[i, 1], out[i, 2] = nx, ny, nth
@@ -99,95 +65,22 @@ def _move_one(
 
 
 @njit(cache=True)
-def _move_serial(
-    grid_bu,
-    res,
-    ox,
-    oy,
-    poses,
-    twists,
-    dt,
-    n_sub,
-    offset,
-    half,
-    static,
-    static_tab,
-    out,
-    bump,
-    dist,
-    boxes,
-):
+def _move_serial(world, poses, twists, dt, n_sub, body, outs):
     for i in range(poses.shape[0]):
-        _move_one(
-            i,
-            grid_bu,
-            res,
-            ox,
-            oy,
-            poses,
-            twists,
-            dt,
-            n_sub,
-            offset,
-            half,
-            static,
-            static_tab,
-            out,
-            bump,
-            dist,
-            boxes,
-        )
+        _move_one(i, world, poses, twists, dt, n_sub, body, outs)
 
 
 @njit(cache=True, parallel=True)
-def _move_parallel(
-    grid_bu,
-    res,
-    ox,
-    oy,
-    poses,
-    twists,
-    dt,
-    n_sub,
-    offset,
-    half,
-    static,
-    static_tab,
-    out,
-    bump,
-    dist,
-    boxes,
-):
+def _move_parallel(world, poses, twists, dt, n_sub, body, outs):
     for i in prange(poses.shape[0]):
-        _move_one(
-            i,
-            grid_bu,
-            res,
-            ox,
-            oy,
-            poses,
-            twists,
-            dt,
-            n_sub,
-            offset,
-            half,
-            static,
-            static_tab,
-            out,
-            bump,
-            dist,
-            boxes,
-        )
+        _move_one(i, world, poses, twists, dt, n_sub, body, outs)
 
 
 PARALLEL_MIN_BODIES = 256  # below this, thread start-up costs more than it saves
 
 
 def move_bodies(
-    grid_bu: np.ndarray,
-    res: float,
-    ox: float,
-    oy: float,
+    grid: OccupancyGrid,
     poses: np.ndarray,
     twists: np.ndarray,
     dt: float,
@@ -208,43 +101,18 @@ def move_bodies(
     dist = np.zeros(n)
     boxes = np.empty((n, 5))
     kernel = _move_parallel if n >= PARALLEL_MIN_BODIES else _move_serial
-    kernel(
-        grid_bu,
-        res,
-        ox,
-        oy,
-        poses,
-        twists,
-        dt,
-        n_sub,
-        offset,
-        half,
-        static,
-        static_tab,
-        out,
-        bump,
-        dist,
-        boxes,
-    )
+    ox, oy = grid.origin_xy_m
+    world = (grid.cells_bu, grid.resolution_m, ox, oy, static, static_tab)
+    kernel(world, poses, twists, dt, n_sub, (offset, half), (out, bump, dist, boxes))
     return out, bump, dist, boxes
 
 
 @njit(cache=True, error_model="numpy")
 def _box_overlap(a, b) -> bool:
-    return rects_overlap(
-        a[0],
-        a[1],
-        math.cos(a[2]),
-        math.sin(a[2]),
-        a[3],
-        a[4],
-        b[0],
-        b[1],
-        math.cos(b[2]),
-        math.sin(b[2]),
-        b[3],
-        b[4],
-    )
+    """Do boxes a and b (rows cx, cy, theta, half_length, half_width) overlap?"""
+    ca, sa = math.cos(a[2]), math.sin(a[2])
+    cb, sb = math.cos(b[2]), math.sin(b[2])
+    return rects_overlap(a[0], a[1], ca, sa, a[3], a[4], b[0], b[1], cb, sb, b[3], b[4])
 
 
 @njit(cache=True)
