@@ -59,6 +59,8 @@ def run_scenario(
                     trail[r.name].append(sim.state.poses[i, :2].copy())
             if progress is not None and (k % 50 == 0 or k == n_steps - 1):
                 progress(sim.state.t_s, total)
+        if sim.errors:  # on_controller_error: stop_robot -- the others went on
+            status = "completed_with_controller_errors"
     except ControllerError as err:
         status, error = "controller_error", str(err)
         raise

@@ -187,6 +187,9 @@ class RobotConfig(_Strict):
     sensors: list[SensorConfig] = []
     odometry: OdometryConfig = OdometryConfig()
     controller: ControllerConfig = IdleConfig(type="idle")
+    knows: list[str] = Field(
+        [], description="robots whose true pose this robot's controller sees (obs.others)"
+    )
 
 
 class Scenario(_Strict):
@@ -197,6 +200,9 @@ class Scenario(_Strict):
     dt_s: float = Field(0.02, gt=0, le=1.0)
     world: WorldConfig
     robots: list[RobotConfig] = Field(min_length=1)
+    on_controller_error: Literal["stop_run", "stop_robot"] = Field(
+        "stop_run", description="a failing controller ends the run, or only stops its robot"
+    )
     _base_dir: Path = PrivateAttr(default=Path("."))
     _source: str = PrivateAttr(default="scenario")
 
@@ -206,6 +212,13 @@ class Scenario(_Strict):
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ValueError(f"robot names must be unique; repeated: {dup}")
+        for k, r in enumerate(self.robots):
+            for other in r.knows:
+                if other not in names or other == r.name:
+                    raise ValueError(
+                        f"robots[{k}].knows: {other!r} is not another robot"
+                        + _did_you_mean(other, [n for n in names if n != r.name])
+                    )
         return self
 
 
@@ -611,7 +624,15 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     specs = [robot_spec(rc, f"robots[{i}] ({rc.name})", sc.dt_s) for i, rc in enumerate(sc.robots)]
     world = World(grid, boxes)
     bindings = _bindings(sc, specs, base)
-    sim = Simulation(world, specs, bindings, dt_s=sc.dt_s, seed=sc.seed if seed is None else seed)
+    sim = Simulation(
+        world,
+        specs,
+        bindings,
+        dt_s=sc.dt_s,
+        seed=sc.seed if seed is None else seed,
+        knows={r.name: r.knows for r in sc.robots if r.knows},
+        on_controller_error=sc.on_controller_error,
+    )
     _check_placement(sim)
     return sim
 

@@ -49,6 +49,11 @@ class Observation:
     wheel_speeds: np.ndarray  # (W,) measured rad/s
     bump: bool  # collided during the last step
     true_pose: np.ndarray  # (3,) GROUND TRUTH x, y, theta: not available to a real robot
+    others: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (3,) pose of the
+    # robots this one is allowed to know about (the scenario's `knows:`; ground truth)
+    model: object = None  # this robot's kinematic model (for command_for / inverse kinematics)
+    mode: str = "inverse"  # "inverse" (commands are twists) or "forward" (wheel speeds)
+    dt_s: float = 0.02  # the kinematics step
 
 
 @dataclass(frozen=True)
@@ -90,6 +95,19 @@ class BatchController(Protocol):
 Controller = Callable[[Observation], object]
 
 
+def command_for(obs: Observation, vx: float, vy: float = 0.0, omega: float = 0.0):
+    """The command that asks for body twist (vx, vy, omega) in this robot's control mode: the
+    twist itself in inverse mode, or, in forward mode, the driven wheel speeds (+ steering)
+    that the robot's own inverse kinematics gives. Behaviours written in twists use this to
+    work for every model and both modes."""
+    if obs.mode != "forward":
+        return Twist(float(vx), float(vy), float(omega))
+    model = obs.model
+    wheels = model.inverse(np.array([[vx, vy, omega]], dtype=np.float64))  # type: ignore[attr-defined]
+    drive = wheels.speeds[0, list(model.driven_wheels)]  # type: ignore[attr-defined]
+    return WheelCommand(tuple(float(v) for v in drive), float(wheels.steering[0]))
+
+
 def command_to_array(cmd: object, width: int, mode: str, name: str, t_s: float) -> np.ndarray:
     """Normalise a controller's return value to ``width`` floats, with a clear error."""
     if isinstance(cmd, Twist):
@@ -115,3 +133,14 @@ def command_to_array(cmd: object, width: int, mode: str, name: str, t_s: float) 
             f"in {mode} mode it must return {what}"
         )
     return np.asarray(values, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class ControllerContext:
+    """What a scenario gives a controller builder: ``build(config, ctx) -> controller``."""
+
+    robot_index: int
+    spec: object  # the robot's RobotSpec (model, body, sensors, initial pose)
+    grid: object  # the world's OccupancyGrid (for behaviours that plan on a known map)
+    robot_names: tuple[str, ...] = ()
+    base_dir: object = None  # the scenario file's folder (pathlib.Path)

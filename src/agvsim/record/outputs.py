@@ -19,7 +19,7 @@ from agvsim.sim.engine import W_MAX, Simulation
 COLUMNS = (
     ["t", "robot", "x", "y", "theta", "vx", "vy", "omega"]
     + [f"wheel{k + 1}_rad_s" for k in range(W_MAX)]
-    + ["steering_rad", "odom_x", "odom_y", "odom_theta", "bump"]
+    + ["steering_rad", "odom_x", "odom_y", "odom_theta", "bump", "state"]
 )
 
 
@@ -41,6 +41,7 @@ class TrajectoryWriter:
         if st.step % self.every:
             return
         lines = []
+        states = self.sim.active_states()
         for i, name in enumerate(self._names):
             w = st.wheel_speeds[i]
             wheels = [f"{w[k]:.6g}" if k < self._nw[i] else "" for k in range(W_MAX)]
@@ -48,7 +49,7 @@ class TrajectoryWriter:
             lines.append(
                 f"{st.t_s:.4f},{name},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},"
                 f"{v[0]:.6g},{v[1]:.6g},{v[2]:.6g},{','.join(wheels)},{st.steering[i]:.6g},"
-                f"{o[0]:.6f},{o[1]:.6f},{o[2]:.6f},{int(st.bump[i])}\n"
+                f"{o[0]:.6f},{o[1]:.6f},{o[2]:.6f},{int(st.bump[i])},{states[i]}\n"
             )
         self._f.write("".join(lines))
         self.rows += len(lines)
@@ -85,6 +86,7 @@ def summary(sim: Simulation, wall_s: float, extra: dict[str, Any] | None = None)
                     "theta_rad": float(o[2]),
                 },
                 "odometry_error_m": float(math.hypot(o[0] - p[0], o[1] - p[1])),
+                "stopped_by_error": bool(st.stopped[i]),
             }
         )
     run = {
@@ -94,6 +96,9 @@ def summary(sim: Simulation, wall_s: float, extra: dict[str, Any] | None = None)
         "real_time_factor": float(st.t_s / wall_s) if wall_s > 0 else None,
         "seed": sim.seed,
         "dt_s": sim.dt_s,
+        "controller_errors": [
+            {"robot": e.robot, "t_s": round(e.t_s, 6), "error": str(e.cause)} for e in sim.errors
+        ],
     }
     if extra:
         run.update(extra)

@@ -82,6 +82,8 @@ class Simulation:
         controllers: Sequence[Binding] = (),
         dt_s: float = 0.02,
         seed: int = 0,
+        knows: dict[str, Sequence[str]] | None = None,
+        on_controller_error: str = "stop_run",
     ):
         if not robots:
             raise ValueError("a simulation needs at least one robot")
@@ -91,6 +93,21 @@ class Simulation:
         if not dt_s > 0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
         self.world, self.robots, self.dt_s, self.seed = world, list(robots), float(dt_s), seed
+        if on_controller_error not in ("stop_run", "stop_robot"):
+            raise ValueError(
+                "on_controller_error must be 'stop_run' or 'stop_robot', "
+                f"got {on_controller_error!r}"
+            )
+        self.on_controller_error = on_controller_error
+        index = {n: k for k, n in enumerate(names)}
+        self._knows: list[list[int]] = [[] for _ in robots]
+        for who, whom in (knows or {}).items():
+            for other in whom:
+                if who not in index or other not in index:
+                    raise ValueError(
+                        f"knows: unknown robot in {who!r} -> {other!r}; robots: {names}"
+                    )
+                self._knows[index[who]].append(index[other])
         self.bindings = list(controllers)
         self._binding_idx = [np.asarray(b.robots, dtype=np.int64) for b in self.bindings]
         self.n = len(self.robots)
@@ -165,6 +182,7 @@ class Simulation:
         self._mode_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
         self._cmd_is_twist = self._mode_twist.copy()
         self._batch_slots: dict[bytes, dict[str, np.ndarray]] = {}
+        self.errors: list[ControllerError] = []
         for b in self.bindings:
             if b.batch:
                 b.controller.reset(len(b.robots), self.rng)
@@ -194,11 +212,27 @@ class Simulation:
             live = idx[~st.stopped[idx]]
             if live.size == 0:
                 continue
-            if b.batch:
-                self._control_batch(b.controller, idx)
-            else:
-                for i in live:
-                    self._control_one(b.controller, int(i))
+            try:
+                if b.batch:
+                    self._control_batch(b.controller, idx)
+                else:
+                    for i in live:
+                        self._control_one(b.controller, int(i))
+            except ControllerError as err:
+                self._controller_failed(err, idx if b.batch else None)
+
+    def _controller_failed(self, err: ControllerError, idx: np.ndarray | None) -> None:
+        """A controller raised or gave a bad command: its robot(s) stop where they are. The
+        run ends (``stop_run``, re-raised) or goes on without them (``stop_robot``)."""
+        st = self.state
+        robots = idx if idx is not None else np.array([self.robot_index(err.robot)])
+        st.stopped[robots] = True
+        self._cmd_twist[robots] = 0.0
+        self._cmd_wheels[robots] = 0.0
+        self._cmd_is_twist[robots] = True
+        self.errors.append(err)
+        if self.on_controller_error == "stop_run":
+            raise err
 
     def _control_batch(self, ctrl: BatchController, idx: np.ndarray) -> None:
         obs = self.batch_observation(idx)
@@ -431,6 +465,10 @@ class Simulation:
             wheel_speeds=st.wheel_speeds[i, :w].copy(),
             bump=bool(st.bump[i]),
             true_pose=st.poses[i].copy(),
+            others={self.robots[j].name: st.poses[j].copy() for j in self._knows[i]},
+            model=robot.model,
+            mode=str(robot.mode),
+            dt_s=self.dt_s,
         )
 
     def batch_observation(self, idx: np.ndarray) -> BatchObservation:
@@ -453,6 +491,23 @@ class Simulation:
             bump=st.bump[idx],
             true_pose=st.poses[idx],
         )
+
+    def active_states(self) -> list[str]:
+        """Each robot's active controller state ("" when its controller has none): read from
+        ``state_name`` (one robot) or ``state_names()`` (a batch controller)."""
+        out = [""] * self.n
+        for b, idx in zip(self.bindings, self._binding_idx, strict=True):
+            ctrl = b.controller
+            if b.batch and hasattr(ctrl, "state_names"):
+                for i, name in zip(idx, ctrl.state_names(), strict=False):
+                    out[int(i)] = name
+            elif not b.batch:
+                name = getattr(ctrl, "state_name", "")
+                for i in idx:
+                    out[int(i)] = name if isinstance(name, str) else ""
+        for i in np.flatnonzero(self.state.stopped):
+            out[int(i)] = "stopped"
+        return out
 
     def robot_index(self, name: str) -> int:
         for i, r in enumerate(self.robots):
