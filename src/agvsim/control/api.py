@@ -14,7 +14,7 @@ followed, for car-like models, by the steering angle in rad (a ``WheelCommand`` 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -75,7 +75,7 @@ class BatchObservation:
 
     t_s: float
     robots: np.ndarray  # (k,) robot indices in the simulation
-    ranges: dict[str, np.ndarray]  # sensor name -> (k, B) latest readings
+    ranges: Mapping[str, np.ndarray]  # sensor name -> (k, B) latest readings
     odom_pose: np.ndarray  # (k, 3)
     bump: np.ndarray  # (k,) bool
     true_pose: np.ndarray  # (k, 3) GROUND TRUTH

@@ -209,7 +209,7 @@ def _check_declarations(c: _Checker, stack: int | None) -> None:
     pos = np.asarray(model.wheel_positions_m())
     expected = (w, 2) if stack is None else (stack, w, 2)
     c.shape("wheel_positions_m", "wheel_positions_m()", pos, expected)
-    c.require(np.all(np.isfinite(pos)), "wheel_positions_m", "wheel positions are not finite")
+    c.require(bool(np.all(np.isfinite(pos))), "wheel_positions_m", "wheel positions are not finite")
     if model.has_steering:
         angle, rate = _steer_limits(model, 1 if stack is None else stack)
         c.require(

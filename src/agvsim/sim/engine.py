@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,7 @@ class Binding:
     """A controller and the robots (indices) it drives. ``batch`` controllers get arrays;
     others are called once per robot with an ``Observation``."""
 
-    controller: object
+    controller: Any
     robots: tuple[int, ...]
     batch: bool = False
 
@@ -62,7 +63,7 @@ class _Group:
     """Robots sharing one kinematic model class (parameters stacked per robot)."""
 
     idx: np.ndarray
-    model: object
+    model: Any  # the stacked KinematicModel of the group
     n_drive: int
     n_wheels: int
     n_steer: int
@@ -181,7 +182,7 @@ class Simulation:
         self._cmd_wheels = np.zeros((n, W_MAX + 1))
         self._mode_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
         self._cmd_is_twist = self._mode_twist.copy()
-        self._batch_slots: dict[bytes, dict[str, np.ndarray]] = {}
+        self._batch_slots: dict[bytes, dict[str, tuple[slice | np.ndarray, int]]] = {}
         self.errors: list[ControllerError] = []
         for b in self.bindings:
             if b.batch:
@@ -526,7 +527,9 @@ def _rows(slots: np.ndarray) -> slice | np.ndarray:
 class _LazyRanges(Mapping):
     """sensor name -> (k, B) readings, gathered only when a controller asks for them."""
 
-    def __init__(self, scans: np.ndarray, slots: dict[str, np.ndarray], tab: SensorTable):
+    def __init__(
+        self, scans: np.ndarray, slots: dict[str, tuple[slice | np.ndarray, int]], tab: SensorTable
+    ):
         self._scans, self._slots, self._tab = scans, slots, tab
 
     def __getitem__(self, name: str) -> np.ndarray:
@@ -543,7 +546,7 @@ class _LazyRanges(Mapping):
         return len(self._slots)
 
 
-def _subset(model: object, sel: np.ndarray) -> object:
+def _subset(model: Any, sel: np.ndarray) -> Any:
     """The stacked model restricted to the robots where ``sel`` is True."""
     from dataclasses import fields, replace
 

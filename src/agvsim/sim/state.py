@@ -38,7 +38,9 @@ class SensorTable:
 
     @classmethod
     def build(cls, robots: Sequence[RobotSpec]) -> SensorTable:
-        specs, owner, slots_of = [], [], []
+        specs: list[RangeSensorSpec] = []
+        owner: list[int] = []
+        slots_of: list[list[int]] = []
         for i, r in enumerate(robots):
             names = [s.name for s in r.sensors]
             if len(set(names)) != len(names):

@@ -249,8 +249,9 @@ def _read_grey(path: Path, source: str) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(path) as img:
-            img.load()
+        with Image.open(path) as opened:
+            opened.load()
+            img: Image.Image = opened
             if img.mode == "P":
                 img = img.convert("RGBA" if "transparency" in img.info else "RGB")
             elif img.mode not in ("L", "LA", "RGB", "RGBA", "I", "F") and "I;16" not in img.mode:
