@@ -200,6 +200,19 @@ def cast_rays_padded(table, bins, origins, beam_angles, max_range, ignore_box, o
 
 
 @njit(cache=True, error_model="numpy")
+def cast_rays_serial(table, bins, origins, beam_angles, max_range, ignore_box, out):
+    """:func:`cast_rays_padded` on the calling thread: for small batches, where waking
+    numba's thread pool costs more than the casting (milliseconds on a busy machine)."""
+    for si in range(beam_angles.shape[0]):
+        x0, y0 = origins[si, 0], origins[si, 1]
+        r_max, skip = max_range[si], ignore_box[si]
+        cast_sensor(table, bins, x0, y0, beam_angles[si], r_max, skip, out[si])
+
+
+PARALLEL_MIN_RAYS = 4096  # fewer beams than this in one call: cast on one thread
+
+
+@njit(cache=True, error_model="numpy")
 def cast_rays(grid_bu, res, ox, oy, origins, beam_angles, max_range, boxes, ignore_box, out):
     """Cast every beam of every sensor in one call; writes ``out (S, B)``, metres.
 
@@ -343,7 +356,8 @@ class RayCaster:
         size = float(rng.max()) + (float(btab[:, 2].max()) if len(bx) else 0.0)
         start, items, geom = build_center_bins(bx, size)
         bins = (bx, btab, start, items, geom)
-        cast_rays_padded(self._table, bins, org, ang, rng, ign, out)
+        kernel = cast_rays_padded if ang.size >= PARALLEL_MIN_RAYS else cast_rays_serial
+        kernel(self._table, bins, org, ang, rng, ign, out)
         return out
 
     def cast_single(
