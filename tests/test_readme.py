@@ -59,5 +59,25 @@ def test_help_lists_every_command():
         [sys.executable, "-m", "agvsim.cli", "--help"], capture_output=True, text=True, timeout=120
     )
     assert res.returncode == 0
-    for cmd in ("run", "validate", "bench", "models"):
+    for cmd in ("run", "validate", "bench", "models", "statechart"):
         assert cmd in res.stdout
+
+
+def test_statechart_command_prints_mermaid_and_dot():
+    def run(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "agvsim.cli", "statechart", *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            cwd=ROOT,
+        )
+
+    mermaid = run("avoid")
+    assert mermaid.returncode == 0, mermaid.stderr
+    assert mermaid.stdout.startswith("stateDiagram-v2") and "drive --> turn_right" in mermaid.stdout
+    dot = run("examples/square_path.py", "--format", "dot")
+    assert dot.returncode == 0 and dot.stdout.startswith("digraph")
+    bad = run("no_such_file.py")
+    assert bad.returncode == 2 and "no_such_file.py" in bad.stderr
+    assert "Traceback" not in bad.stderr

@@ -135,6 +135,27 @@ def bench(
 
 
 @app.command()
+def statechart(
+    controller: Annotated[
+        str, typer.Argument(help="A built-in chart (avoid) or FILE.py[:NAME] defining one.")
+    ],
+    fmt: Annotated[str, typer.Option("--format", help="mermaid or dot (Graphviz).")] = "mermaid",
+) -> None:
+    """Print a state-machine controller's diagram as Mermaid or Graphviz text."""
+    from agvsim.control.statechart import resolve, to_dot, to_mermaid
+
+    if fmt not in ("mermaid", "dot"):
+        _fail("error", f"--format must be 'mermaid' or 'dot', got {fmt!r}")
+        raise typer.Exit(2)
+    try:
+        sm = resolve(controller)
+    except (ValueError, OSError) as e:
+        _fail("error", e)
+        raise typer.Exit(2) from None
+    sys.stdout.write((to_mermaid(sm) if fmt == "mermaid" else to_dot(sm)) + "\n")
+
+
+@app.command()
 def models() -> None:
     """List the kinematic models and their parameters."""
     from dataclasses import MISSING, fields

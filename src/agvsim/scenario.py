@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import importlib.util
+import inspect
 import re
 from dataclasses import fields as dc_fields
 from pathlib import Path
@@ -508,7 +509,28 @@ def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any
                 + _did_you_mean(cfg.name, found)
             ],
         )
-    return obj() if isinstance(obj, type) else obj
+    # a class, or a function taking no argument, makes the controller; anything else
+    # (a function of obs, an object with step()) is the controller itself
+    if isinstance(obj, type) or (callable(obj) and _takes_no_arguments(obj)):
+        try:
+            return obj()
+        except Exception as err:  # noqa: BLE001 - the user's code: report, don't crash
+            raise ScenarioError(
+                "", [f"{where}.controller.name: {cfg.name}() failed: {type(err).__name__}: {err}"]
+            ) from None
+    return obj
+
+
+def _takes_no_arguments(fn: Any) -> bool:
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    return not any(
+        p.default is inspect.Parameter.empty
+        and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        for p in params
+    )
 
 
 def _bindings(sc: Scenario, specs: list[RobotSpec], base_dir: Path) -> list[Binding]:
