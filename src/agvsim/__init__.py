@@ -31,10 +31,12 @@ _PUBLIC = {
     "Scenario": "agvsim.scenario",
     "ScenarioError": "agvsim.scenario",
     "Simulation": "agvsim.sim.engine",
+    "StateMachine": "agvsim.control.statemachine",
     "Twist": "agvsim.control.api",
     "WheelCommand": "agvsim.control.api",
     "World": "agvsim.sim.spec",
     "build": "agvsim.scenario",
+    "command_for": "agvsim.control.api",
     "load_scenario": "agvsim.scenario",
 }
 
@@ -48,10 +50,12 @@ __all__ = [
     "Scenario",
     "ScenarioError",
     "Simulation",
+    "StateMachine",
     "Twist",
     "WheelCommand",
     "World",
     "build",
+    "command_for",
     "load_scenario",
 ]
 
@@ -63,7 +67,8 @@ def __getattr__(name: str):
 
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
-    from agvsim.control.api import LaserScan, Observation, Twist, WheelCommand
+    from agvsim.control.api import LaserScan, Observation, Twist, WheelCommand, command_for
+    from agvsim.control.statemachine import StateMachine
     from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
     from agvsim.sim.engine import Binding, ControllerError, Simulation
     from agvsim.sim.spec import ControlMode, RobotSpec, World
