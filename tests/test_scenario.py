@@ -19,22 +19,8 @@ import yaml
 
 from agvsim.kinematics import MODELS
 from agvsim.scenario import (
-    AvoidConfig,
-    Body,
-    BoxObstacle,
-    IdleConfig,
-    LidarConfig,
-    OdometryConfig,
-    Pose,
-    PythonControllerConfig,
-    RandomMaze,
-    RangersConfig,
-    RobotConfig,
     Scenario,
     ScenarioError,
-    ScriptConfig,
-    ScriptStepConfig,
-    WorldConfig,
     build,
     load_scenario,
     parse_scenario,
@@ -360,23 +346,22 @@ def test_round_trip_dict_yaml_and_dump(tmp_path):
 
 
 # ---------------------------------------------------------------------------------- docs
-SCHEMA = (
-    Scenario,
-    WorldConfig,
-    RandomMaze,
-    BoxObstacle,
-    RobotConfig,
-    Body,
-    Pose,
-    RangersConfig,
-    LidarConfig,
-    OdometryConfig,
-    ScriptConfig,
-    ScriptStepConfig,
-    AvoidConfig,
-    PythonControllerConfig,
-    IdleConfig,
-)
+def _schema_classes() -> list:
+    """Every config class reachable from Scenario (so new controller types are checked too)."""
+    from agvsim.scenario import _models_in
+
+    seen, todo = [], [Scenario]
+    while todo:
+        cls = todo.pop()
+        if cls in seen:
+            continue
+        seen.append(cls)
+        for f in cls.model_fields.values():
+            todo.extend(_models_in(f.annotation))
+    return seen
+
+
+SCHEMA = _schema_classes()
 
 
 def test_docs_name_every_key_and_model_parameter():

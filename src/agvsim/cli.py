@@ -101,6 +101,13 @@ def run(
             f"final ({p['x_m']:.2f}, {p['y_m']:.2f}, "
             f"{p['theta_rad']:.2f} rad)"
         )
+    for name, values in data.get("metrics", {}).items():
+        shown = ", ".join(
+            f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}" for k, v in values.items()
+        )
+        out.print(f"  metric {name}: {shown}")
+    if r["status"] != "completed":
+        out.print(f"  status: {r['status']}")
     out.print(
         f"outputs: {out_dir}/summary.json, trajectory.csv" + ("" if no_plot else ", plot.png")
     )

@@ -44,6 +44,7 @@ def run_scenario(
     if not total > 0:
         raise ScenarioError(source, [f"duration must be > 0 s, got {total}"])
     n_steps = int(round(total / sim.dt_s))
+    metrics = _metrics(sc, sim, source)
     writer = TrajectoryWriter(out / "trajectory.csv", sim, record_every)
     trail: dict[str, list] = {r.name: [] for r in sim.robots}
     trail_every = max(1, n_steps // 4000)
@@ -54,6 +55,10 @@ def run_scenario(
         for k in range(n_steps):
             sim.step()
             writer.record()
+            # a list, not a generator: every metric sees every step
+            if any([m.update(sim) for m in metrics.values()]):
+                status = "ended_by_metric"
+                break
             if k % trail_every == 0:
                 for i, r in enumerate(sim.robots):
                     trail[r.name].append(sim.state.poses[i, :2].copy())
@@ -82,10 +87,25 @@ def run_scenario(
                 "trajectory_rows": writer.rows,
             },
         )
+        data["metrics"] = {name: m.result() for name, m in metrics.items()}
         write_summary(out / "summary.json", data)
         if plot:
             _plot(sim, trail, out / "plot.png", sc.name)
     return data
+
+
+def _metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
+    """The scenario's ``metrics:`` block as metric objects (see agvsim.metrics)."""
+    from agvsim.metrics.capture import build_capture
+
+    names = [r.name for r in sim.robots]
+    out: dict = {}
+    try:
+        if sc.metrics.capture is not None:
+            out["capture"] = build_capture(sc.metrics.capture, names)
+    except ValueError as err:
+        raise ScenarioError(source, [str(err)]) from None
+    return out
 
 
 def _plot(sim: Simulation, trail: dict[str, list], path: Path, title: str) -> None:

@@ -11,18 +11,22 @@ import difflib
 import importlib.util
 import inspect
 import re
+from collections.abc import Callable
 from dataclasses import fields as dc_fields
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from agvsim.control.adapters import WheelsFromTwist
+from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
+from agvsim.control.pursuit import EvadeConfig, PursueConfig, build_evade, build_pursue
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
+from agvsim.metrics.capture import CaptureConfig
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
@@ -171,10 +175,20 @@ class IdleConfig(_Strict):
     type: Literal["idle"]
 
 
+# Behaviours that bring their own config and builder: config class -> build(config, ctx)
+BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
+    PursueConfig: build_pursue,
+    EvadeConfig: build_evade,
+}
+
 ControllerConfig = Annotated[
-    ScriptConfig | AvoidConfig | PythonControllerConfig | IdleConfig,
+    Union[(ScriptConfig, AvoidConfig, PythonControllerConfig, IdleConfig, *BEHAVIOURS)],  # noqa: UP007
     Field(discriminator="type"),
 ]
+
+
+class MetricsConfig(_Strict):
+    capture: CaptureConfig | None = None
 
 
 class RobotConfig(_Strict):
@@ -201,6 +215,7 @@ class Scenario(_Strict):
     dt_s: float = Field(0.02, gt=0, le=1.0)
     world: WorldConfig
     robots: list[RobotConfig] = Field(min_length=1)
+    metrics: MetricsConfig = MetricsConfig()
     on_controller_error: Literal["stop_run", "stop_robot"] = Field(
         "stop_run", description="a failing controller ends the run, or only stops its robot"
     )
@@ -533,12 +548,21 @@ def _takes_no_arguments(fn: Any) -> bool:
     )
 
 
-def _bindings(sc: Scenario, specs: list[RobotSpec], base_dir: Path) -> list[Binding]:
+def _bindings(
+    sc: Scenario, specs: list[RobotSpec], base_dir: Path, grid: OccupancyGrid
+) -> list[Binding]:
     out: list[Binding] = []
     avoid_groups: dict[tuple, list[int]] = {}
+    names = tuple(r.name for r in sc.robots)
     for i, rc in enumerate(sc.robots):
         c, where = rc.controller, f"robots[{i}] ({rc.name})"
-        if isinstance(c, ScriptConfig):
+        if type(c) in BEHAVIOURS:
+            ctx = ControllerContext(i, specs[i], grid, names, base_dir)
+            try:
+                out.append(Binding(BEHAVIOURS[type(c)](c, ctx), (i,)))
+            except ValueError as err:
+                raise ScenarioError("", [f"{where}.controller: {err}"]) from None
+        elif isinstance(c, ScriptConfig):
             steps = []
             for st in c.steps:
                 twist = None
@@ -645,7 +669,7 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     ).reshape(-1, 5)
     specs = [robot_spec(rc, f"robots[{i}] ({rc.name})", sc.dt_s) for i, rc in enumerate(sc.robots)]
     world = World(grid, boxes)
-    bindings = _bindings(sc, specs, base)
+    bindings = _bindings(sc, specs, base, grid)
     sim = Simulation(
         world,
         specs,
