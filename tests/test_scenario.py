@@ -61,7 +61,7 @@ CASES = [
     (
         "unknown_controller_type.yaml",
         r"robots\[0\]\.controller\b",
-        ["unknown type 'scrpt'", "did you mean 'script'?", "avoid, idle, python, script"],
+        ["unknown type 'scrpt'", "did you mean 'script'?", "avoid, evade, goto_goal"],
     ),
     (
         "negative_wheel_radius.yaml",

@@ -97,12 +97,15 @@ def run_scenario(
 def _metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
     """The scenario's ``metrics:`` block as metric objects (see agvsim.metrics)."""
     from agvsim.metrics.capture import build_capture
+    from agvsim.metrics.reach import build_reach
 
     names = [r.name for r in sim.robots]
     out: dict = {}
     try:
         if sc.metrics.capture is not None:
             out["capture"] = build_capture(sc.metrics.capture, names)
+        if sc.metrics.reach is not None:
+            out["reach"] = build_reach(sc.metrics.reach, names)
     except ValueError as err:
         raise ScenarioError(source, [str(err)]) from None
     return out

@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
+from agvsim.control import goal, maze_solver, teleop
 from agvsim.control.adapters import WheelsFromTwist
 from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
@@ -27,6 +28,7 @@ from agvsim.control.pursuit import EvadeConfig, PursueConfig, build_evade, build
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.metrics.capture import CaptureConfig
+from agvsim.metrics.reach import ReachConfig
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
@@ -177,8 +179,12 @@ class IdleConfig(_Strict):
 
 # Behaviours that bring their own config and builder: config class -> build(config, ctx)
 BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
+    goal.GoalConfig: goal.build,
+    goal.WaypointsConfig: goal.build,
+    maze_solver.MazeSolverConfig: maze_solver.build,
     PursueConfig: build_pursue,
     EvadeConfig: build_evade,
+    teleop.TeleopConfig: teleop.build,
 }
 
 ControllerConfig = Annotated[
@@ -189,6 +195,7 @@ ControllerConfig = Annotated[
 
 class MetricsConfig(_Strict):
     capture: CaptureConfig | None = None
+    reach: ReachConfig | None = None
 
 
 class RobotConfig(_Strict):
