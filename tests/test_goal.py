@@ -8,19 +8,17 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from agvsim.control.api import ControllerContext, Twist, WheelCommand
-from agvsim.control.goal import (
-    PID,
+from agvsim.behaviours import (
     GoalConfig,
-    GoToGoal,
-    Mobility,
-    PathTracker,
-    PurePursuit,
+    TeleopConfig,
     WaypointsConfig,
-    build,
+    build_goal,
+    build_teleop,
+    build_waypoints,
 )
-from agvsim.control.teleop import KEYS, Teleop, TeleopConfig, key_name
-from agvsim.control.teleop import build as build_teleop
+from agvsim.control.api import ControllerContext, Twist, WheelCommand
+from agvsim.control.goal import PID, GoToGoal, Mobility, PathTracker, PurePursuit
+from agvsim.control.teleop import KEYS, Teleop, key_name
 from agvsim.kinematics import MODELS
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
@@ -175,13 +173,15 @@ def test_pure_pursuit_loop_goes_round_again():
 # ------------------------------------------------------------------------------------ configs
 def test_goal_configs_build_controllers():
     ctx = ControllerContext(0, robot("differential"), arena().grid)
-    ctrl = build(GoalConfig(type="goto_goal", goal_x_m=1.0, goal_y_m=2.0, tolerance_m=0.2), ctx)
+    ctrl = build_goal(
+        GoalConfig(type="goto_goal", goal_x_m=1.0, goal_y_m=2.0, tolerance_m=0.2), ctx
+    )
     assert isinstance(ctrl, GoToGoal) and ctrl.tolerance_m == 0.2
     np.testing.assert_allclose(ctrl.goal, [1.0, 2.0])
     wp = WaypointsConfig.model_validate(
         {"type": "waypoints", "points": [[0, 0], [1, 0]], "loop": True, "speed_m_s": 0.3}
     )
-    ctrl2 = build(wp, ctx)
+    ctrl2 = build_waypoints(wp, ctx)
     assert isinstance(ctrl2, PurePursuit) and ctrl2.tracker.loop  # there and back
     with pytest.raises(ValidationError):
         GoalConfig.model_validate({"type": "goto_goal", "goal_x_m": 1, "goal_y_m": 1, "spd": 1})

@@ -14,6 +14,10 @@ CORE = [
     "agvsim.sim.engine",
     "agvsim.control.avoid",
     "agvsim.control.script",
+    "agvsim.control.goal",
+    "agvsim.control.maze_solver",
+    "agvsim.control.teleop",
+    "agvsim.control.pursuit",
 ]
 # (yaml is not listed: numba itself imports it, to read an optional .numba_config.yaml)
 FORBIDDEN = [
@@ -23,6 +27,7 @@ FORBIDDEN = [
     "rich",
     "pydantic",
     "agvsim.scenario",
+    "agvsim.behaviours",
     "agvsim.viz",
     "agvsim.record",
     "agvsim.cli",

@@ -12,14 +12,13 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
+from agvsim.behaviours import MazeSolverConfig, build_maze_solver
 from agvsim.control.api import ControllerContext
 from agvsim.control.maze_solver import (
     AStarMazeSolver,
     ClearanceMap,
-    MazeSolverConfig,
     TremauxExplorer,
     astar,
-    build,
     plan_path,
 )
 from agvsim.kinematics import MODELS
@@ -220,9 +219,11 @@ def test_maze_solver_config_validation_and_build():
     grid = random_maze(3, 3, 0)
     spec = robot("ackermann", (*room_center(grid, 0, 0), 0.0), sensors=[lidar()])
     ctx = ControllerContext(0, spec, grid)
-    a = build(MazeSolverConfig(type="maze_solver", goal_cell=(7, 7), speed_m_s=0.5), ctx)
+    a = build_maze_solver(
+        MazeSolverConfig(type="maze_solver", goal_cell=(7, 7), speed_m_s=0.5), ctx
+    )
     assert isinstance(a, AStarMazeSolver) and a.speed == 0.5
-    t = build(
+    t = build_maze_solver(
         MazeSolverConfig.model_validate(
             {"type": "maze_solver", "method": "tremaux", "goal_x_m": 1.0, "goal_y_m": -1.0}
         ),
@@ -243,7 +244,9 @@ def test_maze_solver_config_validation_and_build():
             MazeSolverConfig.model_validate(data)
     no_lidar = ControllerContext(0, robot("differential", (0.0, 0.0, 0.0)), grid)
     with pytest.raises(ValueError, match="sensor"):
-        build(MazeSolverConfig(type="maze_solver", method="tremaux", goal_cell=(7, 7)), no_lidar)
+        build_maze_solver(
+            MazeSolverConfig(type="maze_solver", method="tremaux", goal_cell=(7, 7)), no_lidar
+        )
 
 
 # ------------------------------------------------------------------------------------ scenarios
@@ -261,7 +264,7 @@ def simulation_from_yaml(path: Path) -> tuple[Simulation, AStarMazeSolver]:
         sc = parse_scenario(data, str(path))
         bare = build_scenario(sc, base_dir=path.parent)
         ctx = ControllerContext(0, bare.robots[0], bare.world.grid, (bare.robots[0].name,))
-        ctrl = build(cfg, ctx)
+        ctrl = build_maze_solver(cfg, ctx)
         sim = Simulation(bare.world, bare.robots, [Binding(ctrl, (0,))], sc.dt_s, sc.seed)
         return sim, ctrl
 

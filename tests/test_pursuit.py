@@ -17,16 +17,9 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
+from agvsim.behaviours import EvadeConfig, PursueConfig, build_evade, build_pursue
 from agvsim.control.api import ControllerContext, LaserScan, Observation, Twist, WheelCommand
-from agvsim.control.pursuit import (
-    EvadeConfig,
-    Evader,
-    FreeSpace,
-    PursueConfig,
-    Pursuer,
-    build_evade,
-    build_pursue,
-)
+from agvsim.control.pursuit import Evader, FreeSpace, Pursuer
 from agvsim.kinematics import DifferentialDrive
 from agvsim.metrics.capture import Capture, CaptureConfig, build_capture
 from agvsim.scenario import RobotConfig, WorldConfig, build_grid, robot_spec

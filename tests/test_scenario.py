@@ -28,7 +28,7 @@ from agvsim.scenario import (
 
 ROOT = Path(__file__).resolve().parents[1]
 BAD = Path(__file__).resolve().parent / "data" / "bad_scenarios"
-SHIPPED = sorted((ROOT / "scenarios").glob("*.yaml"))
+SHIPPED = sorted((ROOT / "scenarios").rglob("*.yaml"))
 MISSING = "no_such_scenario.yaml"  # deliberately absent from BAD
 
 # Text that betrays a leaked stack trace or library internals.

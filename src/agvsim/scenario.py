@@ -11,7 +11,6 @@ import difflib
 import importlib.util
 import inspect
 import re
-from collections.abc import Callable
 from dataclasses import fields as dc_fields
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
@@ -20,11 +19,10 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
-from agvsim.control import goal, maze_solver, teleop
+from agvsim.behaviours import BEHAVIOURS
 from agvsim.control.adapters import WheelsFromTwist
 from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
-from agvsim.control.pursuit import EvadeConfig, PursueConfig, build_evade, build_pursue
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.metrics.capture import CaptureConfig
@@ -177,16 +175,8 @@ class IdleConfig(_Strict):
     type: Literal["idle"]
 
 
-# Behaviours that bring their own config and builder: config class -> build(config, ctx)
-BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
-    goal.GoalConfig: goal.build,
-    goal.WaypointsConfig: goal.build,
-    maze_solver.MazeSolverConfig: maze_solver.build,
-    PursueConfig: build_pursue,
-    EvadeConfig: build_evade,
-    teleop.TeleopConfig: teleop.build,
-}
-
+# Behaviours that bring their own config and builder (agvsim.behaviours.BEHAVIOURS) join the
+# built-in controller types here
 ControllerConfig = Annotated[
     Union[(ScriptConfig, AvoidConfig, PythonControllerConfig, IdleConfig, *BEHAVIOURS)],  # noqa: UP007
     Field(discriminator="type"),

@@ -7,6 +7,7 @@ pursuer comes within ``alert_distance_m`` it turns towards the side of the squar
 most free space and flees. Both keep off the walls with their range sensors (the thesis's
 green rangers). Each knows the other's pose through ``obs.others`` (the scenario's
 ``knows:``), as the thesis fed the distance and angle between the robots to both.
+Their scenario configs and builders (``pursue``, ``evade``) are in :mod:`agvsim.behaviours`.
 
 Both are plain per-robot controllers (``reset()``, ``step(obs)``, ``state_name``) that ask
 for body twists through ``command_for``, so they drive any model in either control mode.
@@ -16,12 +17,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
-from agvsim.control.api import ControllerContext, LaserScan, Observation, command_for
+from agvsim.control.api import LaserScan, Observation, command_for
 
 
 def _wrap(a: float) -> float:
@@ -351,84 +350,3 @@ class Evader:
         self._state = state
         self.state_name = "avoid" if acted else state
         return command_for(obs, vx, 0.0, omega)
-
-
-# ---------------------------------------------------------------------------------- scenario
-class PursueConfig(BaseModel):
-    """``controller: {type: pursue, target: blue, ...}``"""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    type: Literal["pursue"]
-    target: str = Field(min_length=1, description="the robot to catch (list it in 'knows')")
-    reorient_deg: float = Field(22.5, gt=0, lt=180, description="turn on the spot beyond this")
-    speed_m_s: float = Field(1.0, gt=0, le=50)
-    turn_rate_rad_s: float = Field(1.0, gt=0, le=50)
-    reorient_speed_m_s: float = Field(0.0, ge=0, le=50, description="speed while reorienting")
-    sensor: str = Field("rangers", description="range sensor used to keep off walls")
-    wall_margin_m: float = Field(0.12, ge=0, le=10, description="clearance kept from walls")
-
-
-class EvadeConfig(BaseModel):
-    """``controller: {type: evade, pursuer: red, ...}``"""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    type: Literal["evade"]
-    pursuer: str = Field(min_length=1, description="the robot to flee (list it in 'knows')")
-    alert_distance_m: float = Field(4.0, gt=0, le=1000)
-    speed_m_s: float = Field(0.8, gt=0, le=50)
-    turn_rate_rad_s: float = Field(2.5, gt=0, le=50)
-    wander_speed_m_s: float | None = Field(None, ge=0, le=50, description="default speed / 2")
-    sensor: str = Field("rangers", description="range sensor used to keep off walls")
-    space_sensor: str = Field("lidar", description="finds free space, if the robot has it")
-    wall_margin_m: float = Field(0.12, ge=0, le=10, description="clearance kept from walls")
-
-
-def _check_robot(name: str, field: str, ctx: ControllerContext) -> None:
-    me = ctx.robot_names[ctx.robot_index] if ctx.robot_names else None
-    if ctx.robot_names and (name not in ctx.robot_names or name == me):
-        others = [n for n in ctx.robot_names if n != me]
-        raise ValueError(f"controller.{field}: {name!r} is not another robot (robots: {others})")
-
-
-def _check_sensor(name: str, field: str, ctx: ControllerContext) -> None:
-    names = [s.name for s in getattr(ctx.spec, "sensors", ())]
-    if name not in names:
-        raise ValueError(f"controller.{field}: the robot has no sensor {name!r} (it has {names})")
-
-
-def _body_and_mounts(ctx: ControllerContext, margin_m: float) -> dict:
-    """The wall guard shaped like the robot's body, and where its sensors sit."""
-    sensors = getattr(ctx.spec, "sensors", ())
-    return {
-        "guard": WallGuard.for_robot(ctx.spec, margin_m=margin_m),
-        "mounts_xy_m": {s.name: tuple(s.mount_xy_m) for s in sensors},
-    }
-
-
-def build_pursue(cfg: PursueConfig, ctx: ControllerContext) -> Pursuer:
-    _check_robot(cfg.target, "target", ctx)
-    _check_sensor(cfg.sensor, "sensor", ctx)
-    return Pursuer(
-        cfg.target,
-        reorient_rad=math.radians(cfg.reorient_deg),
-        speed_m_s=cfg.speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        reorient_speed_m_s=cfg.reorient_speed_m_s,
-        sensor=cfg.sensor,
-        **_body_and_mounts(ctx, cfg.wall_margin_m),
-    )
-
-
-def build_evade(cfg: EvadeConfig, ctx: ControllerContext) -> Evader:
-    _check_robot(cfg.pursuer, "pursuer", ctx)
-    _check_sensor(cfg.sensor, "sensor", ctx)
-    return Evader(
-        cfg.pursuer,
-        alert_distance_m=cfg.alert_distance_m,
-        speed_m_s=cfg.speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        wander_speed_m_s=cfg.wander_speed_m_s,
-        sensor=cfg.sensor,
-        space_sensor=cfg.space_sensor,
-        **_body_and_mounts(ctx, cfg.wall_margin_m),
-    )

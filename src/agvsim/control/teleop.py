@@ -32,13 +32,9 @@ as well to turn. ``set_wheels`` sends wheel speeds (+ steering) in either mode.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Iterable, Sequence
-from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
-
-from agvsim.control.api import ControllerContext, Observation, Twist, WheelCommand, command_for
+from agvsim.control.api import Observation, Twist, WheelCommand, command_for
 
 #: key -> (vx, vy, omega) as fractions of the linear, lateral and turn speeds
 KEYS: dict[str, tuple[float, float, float]] = {
@@ -166,28 +162,3 @@ class Teleop:
             return cmd
         assert isinstance(cmd, Twist)
         return command_for(obs, cmd.vx, cmd.vy, cmd.omega)
-
-
-class TeleopConfig(BaseModel):
-    """``controller: {type: teleop, deadman_s: 0.5}``"""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    type: Literal["teleop"]
-    deadman_s: float = Field(0.5, gt=0, le=3600)
-    linear_speed_m_s: float = Field(0.5, gt=0, le=100)
-    lateral_speed_m_s: float = Field(0.5, gt=0, le=100)
-    turn_rate_rad_s: float = Field(1.0, gt=0, le=100)
-    clock: Literal["simulation", "wall"] = Field(
-        "simulation", description="time of the dead-man timeout: sim time or time.monotonic"
-    )
-
-
-def build(cfg: TeleopConfig, ctx: ControllerContext) -> Teleop:
-    """A ``Teleop`` from its config (the app keeps the object to send commands to it)."""
-    return Teleop(
-        deadman_s=cfg.deadman_s,
-        linear_speed_m_s=cfg.linear_speed_m_s,
-        lateral_speed_m_s=cfg.lateral_speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        clock=time.monotonic if cfg.clock == "wall" else None,
-    )

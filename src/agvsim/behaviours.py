@@ -1,0 +1,298 @@
+"""The scenario's behaviours: each controller ``type`` with its typed config and its builder.
+
+A config class validates the scenario file's ``controller:`` section (unknown keys and bad
+values are refused there, at the edge); its builder turns it into a plain core controller from
+:mod:`agvsim.control`, which never sees pydantic. ``BEHAVIOURS`` is the registry the scenario
+loader uses: config class -> ``build(config, ctx)``.
+
+=============  ====================  ======================================================
+type           config                controller
+=============  ====================  ======================================================
+goto_goal      ``GoalConfig``        :class:`agvsim.control.goal.GoToGoal`
+waypoints      ``WaypointsConfig``   :class:`agvsim.control.pure_pursuit.PurePursuit`
+maze_solver    ``MazeSolverConfig``  :class:`agvsim.control.maze_solver.AStarMazeSolver`,
+                                     :class:`agvsim.control.explorer.TremauxExplorer`
+pursue         ``PursueConfig``      :class:`agvsim.control.pursuit.Pursuer`
+evade          ``EvadeConfig``       :class:`agvsim.control.pursuit.Evader`
+teleop         ``TeleopConfig``      :class:`agvsim.control.teleop.Teleop`
+=============  ====================  ======================================================
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from agvsim.control.api import ControllerContext
+from agvsim.control.explorer import TremauxExplorer
+from agvsim.control.goal import GoToGoal
+from agvsim.control.maze_solver import AStarMazeSolver
+from agvsim.control.mobility import PoseSource
+from agvsim.control.pure_pursuit import PurePursuit
+from agvsim.control.pursuit import Evader, Pursuer, WallGuard
+from agvsim.control.teleop import Teleop
+
+
+# ---------------------------------------------------------------------------------- goal
+class GoalConfig(BaseModel):
+    """``controller: {type: goto_goal, goal_x_m: 3, goal_y_m: -2}``"""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["goto_goal"]
+    goal_x_m: float
+    goal_y_m: float
+    tolerance_m: float = Field(0.1, gt=0, le=100)
+    max_speed_m_s: float = Field(0.8, gt=0, le=100)
+    max_turn_rate_rad_s: float = Field(1.5, gt=0, le=100)
+    heading_kp: float = Field(2.5, ge=0)
+    heading_ki: float = Field(0.2, ge=0)
+    heading_kd: float = Field(0.05, ge=0)
+    speed_kp: float = Field(0.8, ge=0)
+    speed_ki: float = Field(0.05, ge=0)
+    speed_kd: float = Field(0.0, ge=0)
+    goal_heading_deg: float | None = Field(None, description="holonomic models turn to this")
+    pose_source: PoseSource = "true_pose"
+
+
+class WaypointsConfig(BaseModel):
+    """``controller: {type: waypoints, points: [[0, 0], [3, 0], [3, 3]], loop: true}``"""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["waypoints"]
+    points: list[tuple[float, float]] = Field(min_length=1, description="[x_m, y_m] each")
+    loop: bool = False
+    lookahead_m: float = Field(0.8, gt=0, le=100)
+    speed_m_s: float = Field(0.5, gt=0, le=100)
+    tolerance_m: float = Field(0.15, gt=0, le=100)
+    max_turn_rate_rad_s: float = Field(1.5, gt=0, le=100)
+    face_travel: bool = True
+    pose_source: PoseSource = "true_pose"
+
+
+def build_goal(cfg: GoalConfig, ctx: ControllerContext) -> GoToGoal:
+    """The controller a ``goto_goal`` config describes."""
+    heading = None if cfg.goal_heading_deg is None else math.radians(cfg.goal_heading_deg)
+    return GoToGoal(
+        (cfg.goal_x_m, cfg.goal_y_m),
+        tolerance_m=cfg.tolerance_m,
+        max_speed_m_s=cfg.max_speed_m_s,
+        max_turn_rate_rad_s=cfg.max_turn_rate_rad_s,
+        heading_gains=(cfg.heading_kp, cfg.heading_ki, cfg.heading_kd),
+        speed_gains=(cfg.speed_kp, cfg.speed_ki, cfg.speed_kd),
+        goal_heading_rad=heading,
+        pose_source=cfg.pose_source,
+    )
+
+
+def build_waypoints(cfg: WaypointsConfig, ctx: ControllerContext) -> PurePursuit:
+    """The controller a ``waypoints`` config describes."""
+    return PurePursuit(
+        cfg.points,
+        lookahead_m=cfg.lookahead_m,
+        speed_m_s=cfg.speed_m_s,
+        loop=cfg.loop,
+        tolerance_m=cfg.tolerance_m,
+        max_turn_rate_rad_s=cfg.max_turn_rate_rad_s,
+        face_travel=cfg.face_travel,
+        pose_source=cfg.pose_source,
+    )
+
+
+# ---------------------------------------------------------------------------------- maze
+class MazeSolverConfig(BaseModel):
+    """``controller: {type: maze_solver, goal_cell: [17, 17], method: astar}``"""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["maze_solver"]
+    method: Literal["astar", "tremaux"] = "astar"
+    goal_cell: tuple[int, int] | None = Field(None, description="[row, col] of the map grid")
+    goal_x_m: float | None = None
+    goal_y_m: float | None = None
+    speed_m_s: float = Field(0.8, gt=0, le=100)
+    goal_tolerance_m: float = Field(0.3, gt=0, le=100)
+    # astar
+    lookahead_m: float = Field(0.8, gt=0, le=100)
+    connectivity: Literal[4, 8] = 8
+    clearance_m: float = Field(0.05, ge=0, le=10, description="extra margin beyond half width")
+    preferred_clearance_m: float = Field(1.0, gt=0, le=100)
+    plan_resolution_m: float = Field(0.25, gt=0, le=10)
+    pose_source: PoseSource = "true_pose"
+    # tremaux
+    sensor: str = "lidar"
+    hand: Literal["right", "left"] = "right"
+    wall_distance_m: float = Field(0.8, gt=0, le=100)
+
+    @model_validator(mode="after")
+    def _one_goal(self) -> MazeSolverConfig:
+        xy = (self.goal_x_m is None, self.goal_y_m is None)
+        if xy[0] != xy[1]:
+            raise ValueError("give both goal_x_m and goal_y_m, or goal_cell")
+        if (self.goal_cell is None) == (self.goal_x_m is None):
+            raise ValueError("give exactly one goal: goal_cell [row, col] or goal_x_m + goal_y_m")
+        return self
+
+
+def build_maze_solver(
+    cfg: MazeSolverConfig, ctx: ControllerContext
+) -> AStarMazeSolver | TremauxExplorer:
+    """The controller a ``maze_solver`` config describes, for robot ``ctx.robot_index``."""
+    spec, grid = ctx.spec, ctx.grid
+    length = float(getattr(spec, "body_length_m", 0.6))
+    width = float(getattr(spec, "body_width_m", 0.45))
+    offset = float(getattr(spec, "body_offset_x_m", 0.0))
+    goal_xy = None if cfg.goal_x_m is None else (cfg.goal_x_m, cfg.goal_y_m)
+    if cfg.method == "tremaux":
+        if goal_xy is None:
+            x, y = grid.cell_center(*cfg.goal_cell)  # type: ignore[misc,union-attr]
+            goal_xy = (float(x), float(y))
+        names = [s.name for s in getattr(spec, "sensors", ())]
+        if cfg.sensor not in names:
+            raise ValueError(f"maze_solver (tremaux) needs the sensor {cfg.sensor!r}; has {names}")
+        return TremauxExplorer(
+            goal_xy,  # type: ignore[arg-type]
+            sensor=cfg.sensor,
+            hand=cfg.hand,
+            wall_distance_m=cfg.wall_distance_m,
+            speed_m_s=cfg.speed_m_s,
+            goal_tolerance_m=cfg.goal_tolerance_m,
+            body_width_m=width,
+        )
+    return AStarMazeSolver(
+        grid,
+        goal_cell=cfg.goal_cell,
+        goal_xy_m=goal_xy,
+        body_length_m=length,
+        body_width_m=width,
+        body_offset_x_m=offset,
+        speed_m_s=cfg.speed_m_s,
+        lookahead_m=cfg.lookahead_m,
+        connectivity=cfg.connectivity,
+        clearance_m=cfg.clearance_m,
+        preferred_clearance_m=cfg.preferred_clearance_m,
+        plan_resolution_m=cfg.plan_resolution_m,
+        goal_tolerance_m=cfg.goal_tolerance_m,
+        pose_source=cfg.pose_source,
+    )
+
+
+# ---------------------------------------------------------------------------------- pursuit
+class PursueConfig(BaseModel):
+    """``controller: {type: pursue, target: blue, ...}``"""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["pursue"]
+    target: str = Field(min_length=1, description="the robot to catch (list it in 'knows')")
+    reorient_deg: float = Field(22.5, gt=0, lt=180, description="turn on the spot beyond this")
+    speed_m_s: float = Field(1.0, gt=0, le=50)
+    turn_rate_rad_s: float = Field(1.0, gt=0, le=50)
+    reorient_speed_m_s: float = Field(0.0, ge=0, le=50, description="speed while reorienting")
+    sensor: str = Field("rangers", description="range sensor used to keep off walls")
+    wall_margin_m: float = Field(0.12, ge=0, le=10, description="clearance kept from walls")
+
+
+class EvadeConfig(BaseModel):
+    """``controller: {type: evade, pursuer: red, ...}``"""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["evade"]
+    pursuer: str = Field(min_length=1, description="the robot to flee (list it in 'knows')")
+    alert_distance_m: float = Field(4.0, gt=0, le=1000)
+    speed_m_s: float = Field(0.8, gt=0, le=50)
+    turn_rate_rad_s: float = Field(2.5, gt=0, le=50)
+    wander_speed_m_s: float | None = Field(None, ge=0, le=50, description="default speed / 2")
+    sensor: str = Field("rangers", description="range sensor used to keep off walls")
+    space_sensor: str = Field("lidar", description="finds free space, if the robot has it")
+    wall_margin_m: float = Field(0.12, ge=0, le=10, description="clearance kept from walls")
+
+
+def _check_robot(name: str, field: str, ctx: ControllerContext) -> None:
+    me = ctx.robot_names[ctx.robot_index] if ctx.robot_names else None
+    if ctx.robot_names and (name not in ctx.robot_names or name == me):
+        others = [n for n in ctx.robot_names if n != me]
+        raise ValueError(f"controller.{field}: {name!r} is not another robot (robots: {others})")
+
+
+def _check_sensor(name: str, field: str, ctx: ControllerContext) -> None:
+    names = [s.name for s in getattr(ctx.spec, "sensors", ())]
+    if name not in names:
+        raise ValueError(f"controller.{field}: the robot has no sensor {name!r} (it has {names})")
+
+
+def _body_and_mounts(ctx: ControllerContext, margin_m: float) -> dict:
+    """The wall guard shaped like the robot's body, and where its sensors sit."""
+    sensors = getattr(ctx.spec, "sensors", ())
+    return {
+        "guard": WallGuard.for_robot(ctx.spec, margin_m=margin_m),
+        "mounts_xy_m": {s.name: tuple(s.mount_xy_m) for s in sensors},
+    }
+
+
+def build_pursue(cfg: PursueConfig, ctx: ControllerContext) -> Pursuer:
+    _check_robot(cfg.target, "target", ctx)
+    _check_sensor(cfg.sensor, "sensor", ctx)
+    return Pursuer(
+        cfg.target,
+        reorient_rad=math.radians(cfg.reorient_deg),
+        speed_m_s=cfg.speed_m_s,
+        turn_rate_rad_s=cfg.turn_rate_rad_s,
+        reorient_speed_m_s=cfg.reorient_speed_m_s,
+        sensor=cfg.sensor,
+        **_body_and_mounts(ctx, cfg.wall_margin_m),
+    )
+
+
+def build_evade(cfg: EvadeConfig, ctx: ControllerContext) -> Evader:
+    _check_robot(cfg.pursuer, "pursuer", ctx)
+    _check_sensor(cfg.sensor, "sensor", ctx)
+    return Evader(
+        cfg.pursuer,
+        alert_distance_m=cfg.alert_distance_m,
+        speed_m_s=cfg.speed_m_s,
+        turn_rate_rad_s=cfg.turn_rate_rad_s,
+        wander_speed_m_s=cfg.wander_speed_m_s,
+        sensor=cfg.sensor,
+        space_sensor=cfg.space_sensor,
+        **_body_and_mounts(ctx, cfg.wall_margin_m),
+    )
+
+
+# ---------------------------------------------------------------------------------- teleop
+class TeleopConfig(BaseModel):
+    """``controller: {type: teleop, deadman_s: 0.5}``"""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["teleop"]
+    deadman_s: float = Field(0.5, gt=0, le=3600)
+    linear_speed_m_s: float = Field(0.5, gt=0, le=100)
+    lateral_speed_m_s: float = Field(0.5, gt=0, le=100)
+    turn_rate_rad_s: float = Field(1.0, gt=0, le=100)
+    clock: Literal["simulation", "wall"] = Field(
+        "simulation", description="time of the dead-man timeout: sim time or time.monotonic"
+    )
+
+
+def build_teleop(cfg: TeleopConfig, ctx: ControllerContext) -> Teleop:
+    """A ``Teleop`` from its config (the app keeps the object to send commands to it)."""
+    return Teleop(
+        deadman_s=cfg.deadman_s,
+        linear_speed_m_s=cfg.linear_speed_m_s,
+        lateral_speed_m_s=cfg.lateral_speed_m_s,
+        turn_rate_rad_s=cfg.turn_rate_rad_s,
+        clock=time.monotonic if cfg.clock == "wall" else None,
+    )
+
+
+# ---------------------------------------------------------------------------------- registry
+# Behaviours that bring their own config and builder: config class -> build(config, ctx)
+BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
+    GoalConfig: build_goal,
+    WaypointsConfig: build_waypoints,
+    MazeSolverConfig: build_maze_solver,
+    PursueConfig: build_pursue,
+    EvadeConfig: build_evade,
+    TeleopConfig: build_teleop,
+}
