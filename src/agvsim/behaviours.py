@@ -15,6 +15,7 @@ maze_solver    ``MazeSolverConfig``  :class:`agvsim.control.maze_solver.AStarMaz
 pursue         ``PursueConfig``      :class:`agvsim.control.pursuit.Pursuer`
 evade          ``EvadeConfig``       :class:`agvsim.control.pursuit.Evader`
 teleop         ``TeleopConfig``      :class:`agvsim.control.teleop.Teleop`
+wall_follow    ``WallFollowConfig``  :class:`agvsim.control.wall_follow.WallFollower`
 =============  ====================  ======================================================
 """
 
@@ -35,6 +36,7 @@ from agvsim.control.mobility import PoseSource
 from agvsim.control.pure_pursuit import PurePursuit
 from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
+from agvsim.control.wall_follow import WallFollower
 
 
 # ---------------------------------------------------------------------------------- goal
@@ -288,6 +290,52 @@ def build_teleop(cfg: TeleopConfig, ctx: ControllerContext) -> Teleop:
 
 # ---------------------------------------------------------------------------------- registry
 # Behaviours that bring their own config and builder: config class -> build(config, ctx)
+class WallFollowConfig(BaseModel):
+    """``controller: {type: wall_follow, side: left, ...}`` in a scenario."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    type: Literal["wall_follow"]
+    side: Literal["left", "right"] = "left"
+    sensor: str = Field("lidar", description="a lidar, or the thesis's four rangers")
+    distance_m: float = Field(0.6, gt=0, le=10, description="from the wall to the body centre")
+    speed_m_s: float = Field(0.4, gt=0, le=10)
+    turn_rate_rad_s: float = Field(1.0, gt=0, le=20)
+    heading_source: Literal["odometry", "true_pose"] = Field(
+        "odometry", description="rangers only: the heading held square to the walls"
+    )
+
+
+def build_wall_follow(cfg: WallFollowConfig, ctx: ControllerContext) -> WallFollower:
+    """The controller for one robot of a scenario: geometry from its spec. Raises ValueError
+    (the message names the field) for a sensor the robot lacks or a distance too short."""
+    spec = ctx.spec
+    sensors = {s.name: s for s in spec.sensors}  # type: ignore[attr-defined]
+    if cfg.sensor not in sensors:
+        raise ValueError(
+            f"sensor: the robot has no sensor {cfg.sensor!r} "
+            f"(it has {', '.join(sorted(sensors)) or 'none'})"
+        )
+    sweep = math.hypot(spec.body_length_m / 2.0, spec.body_width_m / 2.0)  # type: ignore[attr-defined]
+    if cfg.distance_m < sweep:
+        raise ValueError(
+            f"distance_m: {cfg.distance_m} m is too close for a body that sweeps "
+            f"{sweep:.2f} m turning on the spot; use at least {math.ceil(sweep * 100) / 100:.2f}"
+        )
+    return WallFollower(
+        side=cfg.side,
+        sensor=cfg.sensor,
+        distance_m=cfg.distance_m,
+        speed_m_s=cfg.speed_m_s,
+        turn_rate_rad_s=cfg.turn_rate_rad_s,
+        body_length_m=spec.body_length_m,  # type: ignore[attr-defined]
+        body_width_m=spec.body_width_m,  # type: ignore[attr-defined]
+        body_offset_x_m=spec.body_offset_x_m,  # type: ignore[attr-defined]
+        sensor_mount_xy_m=sensors[cfg.sensor].mount_xy_m,
+        heading_source=cfg.heading_source,
+    )
+
+
 BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
     GoalConfig: build_goal,
     WaypointsConfig: build_waypoints,
@@ -295,4 +343,5 @@ BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
     PursueConfig: build_pursue,
     EvadeConfig: build_evade,
     TeleopConfig: build_teleop,
+    WallFollowConfig: build_wall_follow,
 }

@@ -97,6 +97,7 @@ def run_scenario(
 def _metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
     """The scenario's ``metrics:`` block as metric objects (see agvsim.metrics)."""
     from agvsim.metrics.capture import build_capture
+    from agvsim.metrics.coverage import build_coverage
     from agvsim.metrics.reach import build_reach
 
     names = [r.name for r in sim.robots]
@@ -106,6 +107,8 @@ def _metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
             out["capture"] = build_capture(sc.metrics.capture, names)
         if sc.metrics.reach is not None:
             out["reach"] = build_reach(sc.metrics.reach, names)
+        if sc.metrics.coverage is not None:
+            out["coverage"] = build_coverage(sc.metrics.coverage, sim)
     except ValueError as err:
         raise ScenarioError(source, [str(err)]) from None
     return out

@@ -26,6 +26,7 @@ from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.metrics.capture import CaptureConfig
+from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
@@ -163,6 +164,9 @@ class AvoidConfig(_Strict):
     speed_m_s: float = Field(0.5, gt=0)
     turn_rate_rad_s: float = Field(1.0, gt=0)
     heading_source: Literal["true_pose", "odometry"] = "true_pose"
+    side_clearance_m: float | None = Field(
+        None, gt=0, description="kept off side walls while driving; default 0.8 x trigger_m"
+    )
 
 
 class PythonControllerConfig(_Strict):
@@ -186,6 +190,7 @@ ControllerConfig = Annotated[
 class MetricsConfig(_Strict):
     capture: CaptureConfig | None = None
     reach: ReachConfig | None = None
+    coverage: CoverageConfig | None = None
 
 
 class RobotConfig(_Strict):
@@ -613,6 +618,7 @@ def _bindings(
             speed_m_s=c.speed_m_s,
             turn_rate_rad_s=c.turn_rate_rad_s,
             heading_source=c.heading_source,
+            side_clearance_m=c.side_clearance_m,
             can_spin=~np.array(car),
         )
         if mode == ControlMode.FORWARD:
