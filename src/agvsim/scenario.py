@@ -7,17 +7,15 @@ ready ``Simulation``. The schema is documented in docs/scenario.md.
 
 from __future__ import annotations
 
-import difflib
 import importlib.util
 import inspect
-import re
 from dataclasses import fields as dc_fields
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Any
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+from pydantic import ValidationError
 
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.control.adapters import WheelsFromTwist
@@ -25,9 +23,19 @@ from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
-from agvsim.metrics.capture import CaptureConfig
-from agvsim.metrics.coverage import CoverageConfig
-from agvsim.metrics.reach import ReachConfig
+from agvsim.scenario_schema import (
+    AvoidConfig,
+    LidarConfig,
+    PythonControllerConfig,
+    RangersConfig,
+    RobotConfig,
+    Scenario,
+    ScriptConfig,
+    WorldConfig,
+    _did_you_mean,
+    _format_errors,
+)
+from agvsim.scenario_schema import _models_in as _models_in  # re-exported
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
@@ -45,290 +53,6 @@ class ScenarioError(ValueError):
     def __str__(self) -> str:
         lines = "\n".join(f"  - {p}" for p in self.problems)
         return f"{self.source} is not a valid scenario:\n{lines}"
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-# ---------------------------------------------------------------------------------- world
-class RandomMaze(_Strict):
-    rows: int = Field(8, ge=1, le=500, description="rooms north-south")
-    cols: int = Field(8, ge=1, le=500, description="rooms west-east")
-    seed: int = 0
-    corridor_cells: int = Field(2, ge=1, le=50)
-    wall_cells: int = Field(1, ge=1, le=50)
-    loop_fraction: float = Field(0.0, ge=0.0, le=1.0)
-
-
-class BoxObstacle(_Strict):
-    x_m: float
-    y_m: float
-    theta_deg: float = 0.0
-    length_m: float = Field(gt=0)
-    width_m: float = Field(gt=0)
-
-
-class WorldConfig(_Strict):
-    maze: Literal["thesis_fig16", "thesis_c1"] | None = None
-    matrix: list[list[int]] | None = None
-    picture: str | None = Field(None, description="text picture: '#' wall, '.' free")
-    file: str | None = Field(None, description=".txt .csv .png .pgm or ROS map .yaml")
-    random: RandomMaze | None = None
-    cell_size_m: float = Field(1.0, gt=0, le=100)
-    origin_xy_m: tuple[float, float] | None = None
-    boxes: list[BoxObstacle] = []
-
-    @model_validator(mode="after")
-    def _one_source(self) -> WorldConfig:
-        given = [k for k in ("maze", "matrix", "picture", "file", "random") if getattr(self, k)]
-        if len(given) != 1:
-            raise ValueError(
-                "give exactly one map source out of maze, matrix, picture, file, random "
-                f"(got {given or 'none'})"
-            )
-        return self
-
-
-# ---------------------------------------------------------------------------------- robots
-class Pose(_Strict):
-    x_m: float = 0.0
-    y_m: float = 0.0
-    theta_deg: float = 0.0
-
-
-class Body(_Strict):
-    length_m: float = Field(0.6, gt=0, le=20)
-    width_m: float = Field(0.45, gt=0, le=20)
-    offset_x_m: float | None = Field(None, description="footprint centre ahead of P")
-
-
-class SensorCommon(_Strict):
-    name: str | None = None
-    rate_hz: float | None = Field(None, gt=0, le=10000)
-    range_min_m: float = Field(0.0, ge=0)
-    noise_std_m: float = Field(0.0, ge=0)
-    dropout_prob: float = Field(0.0, ge=0, le=1)
-    mount_x_m: float | None = None
-    mount_y_m: float = 0.0
-    mount_yaw_deg: float = 0.0
-
-
-class RangersConfig(SensorCommon):
-    type: Literal["rangers"]
-    range_max_m: float = Field(1.0, gt=0, le=1000)
-
-
-class LidarConfig(SensorCommon):
-    type: Literal["lidar"]
-    beams: int = Field(240, ge=1, le=100000)
-    fov_deg: float = Field(360.0, gt=0, le=360)
-    angle_min_deg: float | None = None
-    range_max_m: float = Field(10.0, gt=0, le=1000)
-
-
-SensorConfig = Annotated[RangersConfig | LidarConfig, Field(discriminator="type")]
-
-
-class OdometryConfig(_Strict):
-    wheel_noise_rel: float = Field(0.01, ge=0, le=1)
-    wheel_noise_abs_rad_s: float = Field(0.0, ge=0)
-    steering_noise_deg: float = Field(0.0, ge=0)
-
-
-class ScriptStepConfig(_Strict):
-    duration_s: float = Field(gt=0)
-    twist: list[float] | None = Field(None, description="[vx, omega] or [vx, vy, omega]")
-    wheels: list[float] | None = Field(None, description="driven wheel speeds, rad/s")
-    steering_deg: float = 0.0
-
-    @model_validator(mode="after")
-    def _one_kind(self) -> ScriptStepConfig:
-        if (self.twist is None) == (self.wheels is None):
-            raise ValueError("each script step needs exactly one of 'twist' or 'wheels'")
-        if self.twist is not None and len(self.twist) not in (2, 3):
-            raise ValueError(f"twist must be [vx, omega] or [vx, vy, omega], got {self.twist}")
-        return self
-
-
-class ScriptConfig(_Strict):
-    type: Literal["script"]
-    steps: list[ScriptStepConfig] = Field(min_length=1)
-    loop: bool = False
-
-
-class AvoidConfig(_Strict):
-    type: Literal["avoid"]
-    sensor: str = "rangers"
-    trigger_m: float = Field(0.8, gt=0)
-    speed_m_s: float = Field(0.5, gt=0)
-    turn_rate_rad_s: float = Field(1.0, gt=0)
-    heading_source: Literal["true_pose", "odometry"] = "true_pose"
-    side_clearance_m: float | None = Field(
-        None, gt=0, description="kept off side walls while driving; default 0.8 x trigger_m"
-    )
-
-
-class PythonControllerConfig(_Strict):
-    type: Literal["python"]
-    file: str = Field(description="a .py file next to the scenario (or an absolute path)")
-    name: str = Field("controller", description="function or class defined in the file")
-
-
-class IdleConfig(_Strict):
-    type: Literal["idle"]
-
-
-# Behaviours that bring their own config and builder (agvsim.behaviours.BEHAVIOURS) join the
-# built-in controller types here
-ControllerConfig = Annotated[
-    Union[(ScriptConfig, AvoidConfig, PythonControllerConfig, IdleConfig, *BEHAVIOURS)],  # noqa: UP007
-    Field(discriminator="type"),
-]
-
-
-class MetricsConfig(_Strict):
-    capture: CaptureConfig | None = None
-    reach: ReachConfig | None = None
-    coverage: CoverageConfig | None = None
-
-
-class RobotConfig(_Strict):
-    name: str = Field(min_length=1)
-    model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
-    mode: ControlMode = ControlMode.INVERSE
-    params: dict[str, float | str] = Field({}, description="model parameters, see `agvsim models`")
-    body: Body = Body()
-    pose: Pose = Pose()
-    color: str = "#d62728"
-    sensors: list[SensorConfig] = []
-    odometry: OdometryConfig = OdometryConfig()
-    controller: ControllerConfig = IdleConfig(type="idle")
-    knows: list[str] = Field(
-        [], description="robots whose true pose this robot's controller sees (obs.others)"
-    )
-
-
-class Scenario(_Strict):
-    name: str = "unnamed scenario"
-    description: str = ""
-    seed: int = 0
-    duration_s: float = Field(60.0, gt=0, le=1e7)
-    dt_s: float = Field(0.02, gt=0, le=1.0)
-    world: WorldConfig
-    robots: list[RobotConfig] = Field(min_length=1)
-    metrics: MetricsConfig = MetricsConfig()
-    on_controller_error: Literal["stop_run", "stop_robot"] = Field(
-        "stop_run", description="a failing controller ends the run, or only stops its robot"
-    )
-    _base_dir: Path = PrivateAttr(default=Path("."))
-    _source: str = PrivateAttr(default="scenario")
-
-    @model_validator(mode="after")
-    def _unique_names(self) -> Scenario:
-        names = [r.name for r in self.robots]
-        dup = sorted({n for n in names if names.count(n) > 1})
-        if dup:
-            raise ValueError(f"robot names must be unique; repeated: {dup}")
-        for k, r in enumerate(self.robots):
-            for other in r.knows:
-                if other not in names or other == r.name:
-                    raise ValueError(
-                        f"robots[{k}].knows: {other!r} is not another robot"
-                        + _did_you_mean(other, [n for n in names if n != r.name])
-                    )
-        return self
-
-
-# ---------------------------------------------------------------------------------- loading
-def _loc(loc: tuple) -> str:
-    out = ""
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        else:
-            out += ("." if out else "") + str(part)
-    return out or "(top level)"
-
-
-def _models_in(ann: Any) -> list[type[BaseModel]]:
-    """Every schema class an annotation can hold (through list, Optional, Union, Annotated)."""
-    if isinstance(ann, type) and issubclass(ann, BaseModel):
-        return [ann]
-    out: list[type[BaseModel]] = []
-    for arg in getattr(ann, "__args__", ()) or ():
-        out += _models_in(arg)
-    origin = getattr(ann, "__origin__", None)
-    if origin is not None and not out:
-        out += _models_in(origin)
-    return out
-
-
-def _tag_of(model: type[BaseModel]) -> str | None:
-    f = model.model_fields.get("type")
-    args = getattr(f.annotation, "__args__", ()) if f is not None else ()
-    return str(args[0]) if args else None
-
-
-def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
-    """Field names of the schema object that ``loc`` (without its last key) points into;
-    pydantic puts a discriminated union's tag (e.g. 'lidar') into the location."""
-    cands: list[type[BaseModel]] = [model]
-    for part in loc[:-1]:
-        if isinstance(part, int):
-            continue
-        tagged = [m for m in cands if _tag_of(m) == part]
-        if tagged:
-            cands = tagged
-            continue
-        nxt: list[type[BaseModel]] = []
-        for m in cands:
-            if part in m.model_fields:
-                nxt += _models_in(m.model_fields[part].annotation)
-        cands = nxt or cands
-    names: list[str] = []
-    for m in cands:
-        names += [n for n in m.model_fields if n not in names]
-    return names
-
-
-def _did_you_mean(word: str, options: list[str]) -> str:
-    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    return f"{hint} (allowed: {', '.join(sorted(options))})"
-
-
-def _format_errors(err: ValidationError) -> list[str]:
-    out = []
-    for e in err.errors():
-        loc = tuple(e["loc"])
-        where = _loc(loc)
-        if e["type"] == "extra_forbidden":
-            key = str(loc[-1])
-            out.append(
-                f"{where}: unknown key {key!r}" + _did_you_mean(key, _fields_at(Scenario, loc))
-            )
-        elif e["type"] == "literal_error" and isinstance(e.get("input"), str):
-            opts = re.findall(r"'([^']*)'", str(e.get("ctx", {}).get("expected", "")))
-            close = difflib.get_close_matches(e["input"], opts, n=1, cutoff=0.6)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            out.append(f"{where}: {e['input']!r} is not allowed{hint} (allowed: {', '.join(opts)})")
-        elif e["type"] == "missing":
-            out.append(f"{where}: required field is missing")
-        elif e["type"] == "union_tag_invalid":
-            ctx = e.get("ctx", {})
-            tag = ctx.get("tag", "?")
-            expected = ctx.get("expected_tags", "")
-            opts = [t.strip(" '") for t in str(expected).split(",")]
-            out.append(f"{where}: unknown type {tag!r}" + _did_you_mean(str(tag), opts))
-        else:
-            msg = e["msg"].removeprefix("Value error, ")
-            value = e.get("input")
-            shown = (
-                repr(value) if not isinstance(value, dict | list) or len(repr(value)) < 80 else ""
-            )
-            out.append(f"{where}: {msg}" + (f" (got {shown})" if shown else ""))
-    return out
 
 
 def parse_scenario(data: Any, source: str = "scenario") -> Scenario:

@@ -11,7 +11,7 @@ Each step, for every robot together (structure of arrays, a loop over model kind
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +31,7 @@ from agvsim.kinematics import actuation
 from agvsim.kinematics.base import _integrate_rows, stack_models
 from agvsim.sensors.range_sensor import apply_noise
 from agvsim.sensors.raycast import RayCaster
+from agvsim.sim import observe
 from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.kernels import move_bodies, pair_faults
 from agvsim.sim.spec import ControlMode, RobotSpec, World
@@ -442,108 +443,24 @@ class Simulation:
 
     # ------------------------------------------------------------------ observations
     def scan(self, slot: int) -> LaserScan:
-        tab, st = self.sensors, self.state
-        spec = tab.specs[slot]
-        return LaserScan(
-            float(st.scan_stamp[slot]),
-            spec.angle_min_rad + spec.mount_yaw_rad,
-            spec.angle_increment_rad,
-            spec.range_min_m,
-            spec.range_max_m,
-            st.scans[slot, : spec.num_beams].copy(),
-        )
+        return observe.scan(self, slot)
 
     def observation(self, i: int) -> Observation:
-        st = self.state
-        robot = self.robots[i]
-        scans = {self.sensors.specs[s].name: self.scan(s) for s in self.sensors.slots_of[i]}
-        w = len(robot.model.wheel_names)
-        return Observation(
-            t_s=st.t_s,
-            name=robot.name,
-            scans=scans,
-            odom_pose=st.odom_poses[i].copy(),
-            wheel_speeds=st.wheel_speeds[i, :w].copy(),
-            bump=bool(st.bump[i]),
-            true_pose=st.poses[i].copy(),
-            others={self.robots[j].name: st.poses[j].copy() for j in self._knows[i]},
-            model=robot.model,
-            mode=str(robot.mode),
-            dt_s=self.dt_s,
-        )
+        return observe.observation(self, i)
 
     def batch_observation(self, idx: np.ndarray) -> BatchObservation:
-        st, tab = self.state, self.sensors
-        key = idx.tobytes()
-        if key not in self._batch_slots:  # which sensor slots each name maps to, once
-            self._batch_slots[key] = {
-                name: (
-                    _rows(slots := np.array([tab.slot(int(i), name) for i in idx])),
-                    tab.specs[int(slots[0])].num_beams,
-                )
-                for name in tab.common_names(idx)
-            }
-        ranges = _LazyRanges(st.scans, self._batch_slots[key], tab)
-        return BatchObservation(
-            t_s=st.t_s,
-            robots=idx,
-            ranges=ranges,
-            odom_pose=st.odom_poses[idx],
-            bump=st.bump[idx],
-            true_pose=st.poses[idx],
-        )
+        return observe.batch_observation(self, idx)
 
     def active_states(self) -> list[str]:
         """Each robot's active controller state ("" when its controller has none): read from
         ``state_name`` (one robot) or ``state_names()`` (a batch controller)."""
-        out = [""] * self.n
-        for b, idx in zip(self.bindings, self._binding_idx, strict=True):
-            ctrl = b.controller
-            if b.batch and hasattr(ctrl, "state_names"):
-                for i, name in zip(idx, ctrl.state_names(), strict=False):
-                    out[int(i)] = name
-            elif not b.batch:
-                name = getattr(ctrl, "state_name", "")
-                for i in idx:
-                    out[int(i)] = name if isinstance(name, str) else ""
-        for i in np.flatnonzero(self.state.stopped):
-            out[int(i)] = "stopped"
-        return out
+        return observe.active_states(self)
 
     def robot_index(self, name: str) -> int:
         for i, r in enumerate(self.robots):
             if r.name == name:
                 return i
         raise KeyError(f"no robot named {name!r}; robots: {[r.name for r in self.robots]}")
-
-
-def _rows(slots: np.ndarray) -> slice | np.ndarray:
-    """Consecutive slots as a slice (their rows are then a view, not a copy)."""
-    if np.all(np.diff(slots) == 1):
-        return slice(int(slots[0]), int(slots[-1]) + 1)
-    return slots
-
-
-class _LazyRanges(Mapping):
-    """sensor name -> (k, B) readings, gathered only when a controller asks for them."""
-
-    def __init__(
-        self, scans: np.ndarray, slots: dict[str, tuple[slice | np.ndarray, int]], tab: SensorTable
-    ):
-        self._scans, self._slots, self._tab = scans, slots, tab
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        rows, width = self._slots[name]
-        return self._scans[rows, :width]
-
-    def __contains__(self, name: object) -> bool:
-        return name in self._slots
-
-    def __iter__(self):
-        return iter(self._slots)
-
-    def __len__(self) -> int:
-        return len(self._slots)
 
 
 def _subset(model: Any, sel: np.ndarray) -> Any:

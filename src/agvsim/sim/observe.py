@@ -1,0 +1,120 @@
+"""Observations: what controllers see of the simulation (scans, odometry, bumps, poses).
+
+Functions of a ``Simulation``; its ``scan``, ``observation``, ``batch_observation`` and
+``active_states`` methods call these.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from agvsim.control.api import BatchObservation, LaserScan, Observation
+from agvsim.sim.state import SensorTable
+
+if TYPE_CHECKING:
+    from agvsim.sim.engine import Simulation
+
+
+def scan(sim: Simulation, slot: int) -> LaserScan:
+    tab, st = sim.sensors, sim.state
+    spec = tab.specs[slot]
+    return LaserScan(
+        float(st.scan_stamp[slot]),
+        spec.angle_min_rad + spec.mount_yaw_rad,
+        spec.angle_increment_rad,
+        spec.range_min_m,
+        spec.range_max_m,
+        st.scans[slot, : spec.num_beams].copy(),
+    )
+
+
+def observation(sim: Simulation, i: int) -> Observation:
+    st = sim.state
+    robot = sim.robots[i]
+    scans = {sim.sensors.specs[s].name: scan(sim, s) for s in sim.sensors.slots_of[i]}
+    w = len(robot.model.wheel_names)
+    return Observation(
+        t_s=st.t_s,
+        name=robot.name,
+        scans=scans,
+        odom_pose=st.odom_poses[i].copy(),
+        wheel_speeds=st.wheel_speeds[i, :w].copy(),
+        bump=bool(st.bump[i]),
+        true_pose=st.poses[i].copy(),
+        others={sim.robots[j].name: st.poses[j].copy() for j in sim._knows[i]},
+        model=robot.model,
+        mode=str(robot.mode),
+        dt_s=sim.dt_s,
+    )
+
+
+def batch_observation(sim: Simulation, idx: np.ndarray) -> BatchObservation:
+    st, tab = sim.state, sim.sensors
+    key = idx.tobytes()
+    if key not in sim._batch_slots:  # which sensor slots each name maps to, once
+        sim._batch_slots[key] = {
+            name: (
+                _rows(slots := np.array([tab.slot(int(i), name) for i in idx])),
+                tab.specs[int(slots[0])].num_beams,
+            )
+            for name in tab.common_names(idx)
+        }
+    ranges = _LazyRanges(st.scans, sim._batch_slots[key], tab)
+    return BatchObservation(
+        t_s=st.t_s,
+        robots=idx,
+        ranges=ranges,
+        odom_pose=st.odom_poses[idx],
+        bump=st.bump[idx],
+        true_pose=st.poses[idx],
+    )
+
+
+def active_states(sim: Simulation) -> list[str]:
+    """Each robot's active controller state ("" when its controller has none): read from
+    ``state_name`` (one robot) or ``state_names()`` (a batch controller)."""
+    out = [""] * sim.n
+    for b, idx in zip(sim.bindings, sim._binding_idx, strict=True):
+        ctrl = b.controller
+        if b.batch and hasattr(ctrl, "state_names"):
+            for i, name in zip(idx, ctrl.state_names(), strict=False):
+                out[int(i)] = name
+        elif not b.batch:
+            name = getattr(ctrl, "state_name", "")
+            for i in idx:
+                out[int(i)] = name if isinstance(name, str) else ""
+    for i in np.flatnonzero(sim.state.stopped):
+        out[int(i)] = "stopped"
+    return out
+
+
+def _rows(slots: np.ndarray) -> slice | np.ndarray:
+    """Consecutive slots as a slice (their rows are then a view, not a copy)."""
+    if np.all(np.diff(slots) == 1):
+        return slice(int(slots[0]), int(slots[-1]) + 1)
+    return slots
+
+
+class _LazyRanges(Mapping):
+    """sensor name -> (k, B) readings, gathered only when a controller asks for them."""
+
+    def __init__(
+        self, scans: np.ndarray, slots: dict[str, tuple[slice | np.ndarray, int]], tab: SensorTable
+    ):
+        self._scans, self._slots, self._tab = scans, slots, tab
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        rows, width = self._slots[name]
+        return self._scans[rows, :width]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._slots
+
+    def __iter__(self):
+        return iter(self._slots)
+
+    def __len__(self) -> int:
+        return len(self._slots)
