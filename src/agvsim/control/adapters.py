@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from agvsim.control.api import BatchController, BatchObservation
+from agvsim.kinematics.actuation import forward_command
 
 
 class WheelsFromTwist:
@@ -18,12 +19,7 @@ class WheelsFromTwist:
         self.inner.reset(k, rng)
 
     def step(self, obs: BatchObservation) -> np.ndarray:
-        twist = np.asarray(self.inner.step(obs), dtype=np.float64)
-        wheels = self.model.inverse(twist)  # type: ignore[attr-defined]
-        drive = wheels.speeds[:, list(self.model.driven_wheels)]  # type: ignore[attr-defined]
-        if self.model.has_steering:  # type: ignore[attr-defined]
-            return np.concatenate([drive, wheels.steering[:, None]], axis=1)
-        return drive
+        return forward_command(self.model, np.asarray(self.inner.step(obs), dtype=np.float64))
 
     def __getattr__(self, name: str):  # state names etc. come from the wrapped behaviour
         return getattr(self.inner, name)

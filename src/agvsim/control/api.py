@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -102,10 +102,12 @@ def command_for(obs: Observation, vx: float, vy: float = 0.0, omega: float = 0.0
     work for every model and both modes."""
     if obs.mode != "forward":
         return Twist(float(vx), float(vy), float(omega))
-    model = obs.model
-    wheels = model.inverse(np.array([[vx, vy, omega]], dtype=np.float64))  # type: ignore[attr-defined]
-    drive = wheels.speeds[0, list(model.driven_wheels)]  # type: ignore[attr-defined]
-    return WheelCommand(tuple(float(v) for v in drive), float(wheels.steering[0]))
+    from agvsim.kinematics.actuation import forward_command
+
+    model: Any = obs.model
+    cmd = forward_command(model, np.array([[vx, vy, omega]]))[0]
+    n = len(model.driven_wheels)
+    return WheelCommand(tuple(float(v) for v in cmd[:n]), float(cmd[n]) if cmd.size > n else 0.0)
 
 
 def command_to_array(cmd: object, width: int, mode: str, name: str, t_s: float) -> np.ndarray:

@@ -20,13 +20,11 @@ the turn ahead, asked for at the side the robot turns to as well.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
 from agvsim.control.api import BatchObservation
-from agvsim.kinematics.base import wrap_angle
+from agvsim.kinematics.base import wrap_angle, wrap_scalar
 
 DRIVE, TURN, REVERSE, BACKOFF = 0, 1, 2, 3
 STATE_NAMES = ("drive", "turn_right", "reverse", "back_off")
@@ -169,14 +167,8 @@ def _nearest(ranges, i, beams) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def _wrap(a: float) -> float:
-    t = math.pi - ((math.pi - a) % (2.0 * math.pi))
-    return math.pi if t <= -math.pi else t
-
-
-@njit(cache=True, error_model="numpy")
 def _snap(h: float, q: float, snap: bool) -> float:
-    return _wrap(round(h / q) * q) if snap else _wrap(h)
+    return wrap_scalar(round(h / q) * q) if snap else wrap_scalar(h)
 
 
 @njit(cache=True, error_model="numpy")
@@ -221,7 +213,7 @@ def _avoid_step(
         if s == DRIVE and front < trigger:  # the thesis: obstacle ahead -> turn 90 deg right
             s = TURN
             target[i] = _snap(h - turn, turn, snap)
-        err = _wrap(target[i] - h)
+        err = wrap_scalar(target[i] - h)
         if (s == TURN or s == REVERSE) and abs(err) < tol:
             s = DRIVE
         if s == TURN and not spin[i] and front < close:  # car-like: K-turn

@@ -37,6 +37,17 @@ def limit_steering(
     return current + np.clip(target - current, -step, step)
 
 
+def forward_command(model: KinematicModel, twists: np.ndarray) -> np.ndarray:
+    """The forward-mode command ``(N, D [+ 1])`` asking for body twists ``(N, 3)``: the driven
+    wheel speeds from the model's inverse kinematics, then the steering angle for car-like
+    models (what a twist-level behaviour hands a robot driven in forward mode)."""
+    wheels = model.inverse(np.asarray(twists, dtype=np.float64))
+    drive = wheels.speeds[..., list(model.driven_wheels)]
+    if model.has_steering:
+        return np.concatenate([drive, wheels.steering[..., None]], axis=-1)
+    return drive
+
+
 def from_drive(model: KinematicModel, drive: np.ndarray, steering: np.ndarray) -> Actuation:
     """Saturate driven wheel speeds ``(N, D)`` and apply them with steering ``(N,)`` (already
     limited)."""

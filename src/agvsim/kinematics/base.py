@@ -25,6 +25,13 @@ def wrap_angle(a: np.ndarray | float) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
+def wrap_scalar(a: float) -> float:
+    """Wrap one angle in rad to (-pi, pi] (numba kernels' twin of ``wrap_angle``)."""
+    t = math.pi - ((math.pi - a) % TWO_PI)
+    return math.pi if t <= -math.pi else t
+
+
+@njit(cache=True, error_model="numpy")
 def se2_step(x: float, y: float, th: float, vx: float, vy: float, w: float, dt: float):
     """One pose moved by a body twist held for ``dt`` s, exactly (scalar kernel; see
     ``integrate_se2``). Returns (x, y, theta) with theta wrapped to (-pi, pi]."""
@@ -39,10 +46,7 @@ def se2_step(x: float, y: float, th: float, vx: float, vy: float, w: float, dt: 
     dx = (vx * sa - vy * ca) * dt
     dy = (vx * ca + vy * sa) * dt
     ct, st = math.cos(th), math.sin(th)
-    t = math.pi - ((math.pi - (th + a)) % TWO_PI)
-    if t <= -math.pi:
-        t = math.pi
-    return x + ct * dx - st * dy, y + st * dx + ct * dy, t
+    return x + ct * dx - st * dy, y + st * dx + ct * dy, wrap_scalar(th + a)
 
 
 @njit(cache=True)
