@@ -6,8 +6,12 @@ import csv
 import json
 import re
 import shlex
+import signal
+import socket
 import subprocess
 import sys
+import time
+import urllib.request
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,13 +27,78 @@ def test_readme_has_exactly_two_commands_and_ci_runs_the_test_one():
     cmds = _commands()
     assert len(cmds) == 2 and all("\n" not in c for c in cmds)
     main, tests = cmds
-    assert "agvsim run" in main and "pytest" in tests
+    assert "agvsim serve" in main and "pytest" in tests
     assert tests in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
 
 
-def test_readme_main_command_runs_and_writes_its_outputs(tmp_path):
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_readme_main_command_serves_the_app_on_localhost():
     main = _commands()[0]
-    run = shlex.split(main.split("&&")[-1])
+    serve = shlex.split(main.split("&&")[-1])
+    assert serve[0].endswith("agvsim") and serve[1] == "serve"
+    port = _free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "agvsim.cli", *serve[1:], "--port", str(port)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        lines: list[str] = []
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "agvsim app on" in line:
+                break
+        banner = "".join(lines)
+        assert f"agvsim app on http://127.0.0.1:{port}" in banner, banner
+        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30).read()
+        assert b"<html" in page.lower() or b"<!doctype html" in page.lower()
+        listening = [c for c in _listeners(port)]
+        assert listening and all(addr == "127.0.0.1" for addr in listening), listening
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+    assert proc.returncode == 0
+
+
+def _listeners(port: int) -> list[str]:
+    """Local addresses listening on ``port`` (from /proc/net/tcp and tcp6)."""
+    out = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            rows = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            local, state = row.split()[1], row.split()[3]
+            addr, p = local.split(":")
+            if state == "0A" and int(p, 16) == port:  # LISTEN
+                if len(addr) == 8:
+                    out.append(socket.inet_ntoa(bytes.fromhex(addr)[::-1]))
+                else:
+                    out.append("ipv6:" + addr)
+    return out
+
+
+def test_readme_headless_run_writes_its_outputs(tmp_path):
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.split("## Headless runs", 1)[1].split("\n## ", 1)[0]
+    cmd = re.findall(r"```bash\n(.*?)```", section, re.S)[0].strip()
+    run = shlex.split(cmd)
     assert run[0].endswith("agvsim") and run[1] == "run"
     args = run[2:]
     out = tmp_path / "out"
@@ -59,7 +128,7 @@ def test_help_lists_every_command():
         [sys.executable, "-m", "agvsim.cli", "--help"], capture_output=True, text=True, timeout=120
     )
     assert res.returncode == 0
-    for cmd in ("run", "validate", "bench", "models", "statechart"):
+    for cmd in ("run", "serve", "validate", "bench", "models", "statechart"):
         assert cmd in res.stdout
 
 

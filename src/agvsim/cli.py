@@ -44,6 +44,43 @@ def main(
 
 
 @app.command()
+def serve(
+    scenario: Annotated[
+        Path | None, typer.Argument(help="Scenario YAML file (default: the thesis maze).")
+    ] = None,
+    host: Annotated[
+        str, typer.Option(help="Interface to listen on; 0.0.0.0 opens it to your network.")
+    ] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port of the app.")] = 8080,
+    play: Annotated[bool, typer.Option("--play", help="Start running at once.")] = False,
+) -> None:
+    """Open the browser app: 3D view, the robot mask, run controls, maze editor, plots."""
+    from agvsim.scenario import ScenarioError
+
+    try:
+        from agvsim.app.server import serve as serve_app
+    except ImportError as e:  # pragma: no cover - viser is a dependency
+        _fail("error", f"the browser app needs viser ({e}); pip install viser")
+        raise typer.Exit(1) from None
+
+    def ready(a) -> None:
+        where = f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{a.port}"
+        out.print(f"agvsim app on [bold]{where}[/bold]  (Ctrl-C stops it)")
+        if host not in ("127.0.0.1", "localhost", "::1"):
+            err.print(f"warning: listening on {host}: anyone on your network can open it",
+                      style="yellow")
+
+    try:
+        serve_app(scenario, host=host, port=port, play=play, on_ready=ready)
+    except ScenarioError as e:
+        _fail("error", e)
+        raise typer.Exit(2) from None
+    except OSError as e:
+        _fail("error", f"cannot listen on {host}:{port}: {e}")
+        raise typer.Exit(1) from None
+
+
+@app.command()
 def run(
     scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
     duration: Annotated[

@@ -36,6 +36,7 @@ from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.kernels import move_bodies, pair_faults
 from agvsim.sim.spec import ControlMode, RobotSpec, World
 from agvsim.sim.state import SensorTable, SimState  # noqa: F401 - SensorTable in hints
+from agvsim.world.grid import OccupancyGrid
 
 W_MAX = 4  # most wheels of any model
 S_MAX = 2  # most steered wheels of any model
@@ -322,6 +323,14 @@ class Simulation:
             twist[st.stopped] = 0.0
             st.wheel_speeds[st.stopped] = 0.0
         return twist
+
+    def set_grid(self, grid: OccupancyGrid) -> None:
+        """Change the walls of the running simulation (a maze editor). Same resolution and
+        extent or not: sensors and collisions use the new grid from the next step on."""
+        self.world = World(grid, self.world.boxes)
+        self.caster.set_grid(grid)
+        self.collider.set_grid(grid)
+        self._substep_len = 0.5 * min(grid.resolution_m, float(self._half.min()))
 
     def footprints(self, poses: np.ndarray) -> np.ndarray:
         """(N, 5) oriented boxes (cx, cy, theta, half_length, half_width) of the bodies."""

@@ -1,0 +1,448 @@
+"""The side panel of the browser app: run controls, the robot mask, the maze editor, views,
+live numbers and plots. Every widget calls into the ``Session``; nothing a browser sends is
+run as code (scenario and map files are parsed as data, python controllers are refused)."""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+import viser
+
+from agvsim.app.mask import Field, MaskError, mask_fields, robot_from_mask
+from agvsim.app.session import SPEEDS, EditError, Session
+from agvsim.kinematics import MODELS
+from agvsim.scenario import ScenarioError
+
+VIEWS = ("panoramic", "top plan", "chase")
+KEYS = {
+    "W": "up",
+    "arrowup": "up",
+    "S": "down",
+    "arrowdown": "down",
+    "A": "left",
+    "arrowleft": "left",
+    "D": "right",
+    "arrowright": "right",
+    "Q": "q",
+    "E": "e",
+    "space": "space",
+}
+
+
+def _error_md(text: str) -> str:
+    lines = [ln.strip().removeprefix("- ") for ln in text.splitlines() if ln.strip()]
+    return "\n".join(f"<span style='color:#c0392b'>&#9888; {ln}</span><br/>" for ln in lines)
+
+
+class Panel:
+    """Builds the GUI and keeps it in step with the session (``refresh()`` a few times a
+    second)."""
+
+    def __init__(self, server: viser.ViserServer, session: Session, scene: Any):
+        self.server, self.session, self.scene = server, session, scene
+        self.selected = session.robot_names()[0]
+        self.view_of: dict[int, str] = {}  # client id -> view
+        self._mask_widgets: dict[str, Any] = {}
+        self._mask_folder: Any = None
+        self._plot_layout = None
+        # GUI structure changes come from callbacks and from the refresh loop: one at a time
+        self._gui_lock = threading.RLock()
+        gui = server.gui
+        gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
+        tabs = gui.add_tab_group()
+        run_tab, self._robot_tab = tabs.add_tab("Run"), tabs.add_tab("Robot")
+        world_tab, self._plots_tab = tabs.add_tab("World"), tabs.add_tab("Plots")
+        with run_tab:
+            self._build_run()
+        with self._robot_tab:
+            self.robot_pick = gui.add_dropdown(
+                "robot", tuple(session.robot_names()), initial_value=self.selected
+            )
+            self.robot_pick.on_update(lambda _: self._select(self.robot_pick.value))
+            self.mask_msg = gui.add_markdown("")
+            self._mask_anchor = gui.add_markdown("**Mask** (apply rebuilds the robot)")
+        self._build_mask(session.robot_config(self.selected))
+        with world_tab:
+            self._build_world()
+        with self._plots_tab:
+            self.numbers = gui.add_markdown("")
+            self.plot_wheels: Any = None
+            self.plot_twist: Any = None
+        self._known_layout = session.layout
+        for key, name in KEYS.items():
+            cmd = gui.add_command(f"drive: {name}", hotkey=key)  # type: ignore[arg-type]
+            cmd.on_trigger(lambda _e, n=name: self._key(n))
+
+    # ------------------------------------------------------------------ run tab
+    def _build_run(self) -> None:
+        gui, s = self.server.gui, self.session
+        self.status = gui.add_markdown("")
+        self.play = gui.add_button("Play", icon=viser.Icon.PLAYER_PLAY)
+        self.play.on_click(lambda _: self._do(s.play))
+        self.pause = gui.add_button("Pause", icon=viser.Icon.PLAYER_PAUSE)
+        self.pause.on_click(lambda _: self._do(s.pause))
+        row = gui.add_button_group("", ("Step", "Step x10", "Reset"))
+        row.on_click(
+            lambda e: self._do(
+                {"Step": lambda: s.step(1), "Step x10": lambda: s.step(10), "Reset": s.reset}[
+                    e.target.value
+                ]
+            )
+        )
+        self.speed = gui.add_dropdown("speed", tuple(SPEEDS), initial_value=s.speed_label)
+        self.speed.on_update(lambda _: self._do(lambda: s.set_speed(self.speed.value)))
+        self.view = gui.add_dropdown(
+            "view",
+            VIEWS,
+            initial_value="panoramic",
+            hint="chase follows the robot picked in the Robot tab",
+        )
+        self.view.on_update(lambda e: self._set_view(e.client, self.view.value))
+        self.keyboard = gui.add_checkbox(
+            "drive with keys",
+            initial_value=False,
+            hint="arrows/WASD add speed and turn rate, Q/E sideways, space stops "
+            "(forward mode: the keys set wheel speeds)",
+        )
+        self.keyboard.on_update(
+            lambda _: self._do(
+                lambda: s.set_keyboard(self.selected if self.keyboard.value else None)
+            )
+        )
+        self.beams = gui.add_checkbox("beams", initial_value=True)
+        self.beams.on_update(lambda _: setattr(self.scene, "show_beams", self.beams.value))
+        self.trails = gui.add_checkbox("trails", initial_value=True)
+        self.trails.on_update(lambda _: setattr(self.scene, "show_trails", self.trails.value))
+        self.overlay = gui.add_checkbox("map overlay", initial_value=False)
+        self.overlay.on_update(lambda _: self._toggle_overlay())
+        gui.add_markdown("**Robots**")
+        self.new_model = gui.add_dropdown("new robot", tuple(MODELS), initial_value="differential")
+        add = gui.add_button("Add robot", icon=viser.Icon.PLUS)
+        add.on_click(lambda _: self._do(self._add_robot))
+        rm = gui.add_button("Remove picked robot", icon=viser.Icon.TRASH)
+        rm.on_click(lambda _: self._do(lambda: s.remove_robot(self.selected)))
+        gui.add_markdown("**Scenario file**")
+        save = gui.add_button("Save scenario (YAML)", icon=viser.Icon.DOWNLOAD)
+        save.on_click(
+            lambda e: e.client.send_file_download(
+                "scenario.yaml", s.scenario_yaml().encode("utf-8")
+            )
+        )
+        load = gui.add_upload_button(
+            "Load scenario", icon=viser.Icon.UPLOAD, mime_type=".yaml,.yml"
+        )
+        load.on_upload(
+            lambda _: self._do(
+                lambda: s.load_yaml(load.value.content.decode("utf-8", "replace"), load.value.name)
+            )
+        )
+        self.run_msg = gui.add_markdown("")
+
+    def _toggle_overlay(self) -> None:
+        self.scene.show_overlay = self.overlay.value
+        self.scene._draw_overlay()
+
+    def _add_robot(self) -> None:
+        x, y = self.session.free_spot(seed=len(self.session.robot_names()))
+        self.selected = self.session.add_robot(self.new_model.value, x, y)
+
+    def _do(self, fn: Any) -> None:
+        """Run an action; show its refusal in the panel instead of a traceback."""
+        try:
+            fn()
+            self.run_msg.content = ""
+        except ScenarioError as err:
+            self.run_msg.content = _error_md("\n".join(err.problems))
+        except (EditError, MaskError, ValueError) as err:
+            self.run_msg.content = _error_md(str(err))
+
+    def _key(self, name: str) -> None:
+        if self.session.keyboard_robot is None:
+            self.run_msg.content = _error_md("tick 'drive with keys' first")
+            return
+        self.session.key(name)
+
+    # ------------------------------------------------------------------ views
+    def _set_view(self, client: Any, view: str) -> None:
+        if client is None:
+            for c in self.server.get_clients().values():
+                self._set_view(c, view)
+            return
+        self.view_of[client.client_id] = view
+        from agvsim.app import shapes
+
+        grid = self.session.sim.world.grid
+        if view == "panoramic":
+            self._place(client, shapes.camera_panoramic(grid))
+        elif view == "top plan":
+            self._place(client, shapes.camera_top(grid, client.camera.fov))
+
+    @staticmethod
+    def _place(client: Any, cam: Any) -> None:
+        with client.atomic():
+            client.camera.up_direction = cam.up
+            client.camera.position = cam.position
+            client.camera.look_at = cam.look_at
+
+    def follow(self) -> None:
+        """Move chase cameras with their robot (every frame)."""
+        from agvsim.app import shapes
+
+        chasers = [
+            c
+            for c in self.server.get_clients().values()
+            if self.view_of.get(c.client_id) == "chase"
+        ]
+        if not chasers:
+            return
+        s = self.session
+        with s.lock:
+            try:
+                pose = s.sim.state.poses[s.sim.robot_index(self.selected)].copy()
+            except (KeyError, ValueError):
+                return
+        cam = shapes.camera_chase(pose)
+        for c in chasers:
+            self._place(c, cam)
+
+    # ------------------------------------------------------------------ the mask
+    def _select(self, name: str) -> None:
+        if name not in self.session.robot_names():
+            return
+        self.selected = name
+        self._build_mask(self.session.robot_config(name))
+        self._plot_layout = None
+
+    def _build_mask(self, robot: dict) -> None:
+        with self._gui_lock:
+            self._build_mask_locked(robot)
+
+    def _build_mask_locked(self, robot: dict) -> None:
+        gui = self.server.gui
+        if self._mask_folder is not None:
+            self._mask_folder.remove()
+        self._mask_widgets = {}
+        self._draft = robot
+        order = self._mask_anchor.order + 0.01
+        with self._robot_tab, gui.add_folder("mask", order=order) as folder:
+            self._mask_folder = folder
+            for f in mask_fields(robot, allow_python=self.session.allow_python):
+                self._mask_widgets[f.key] = self._widget(f)
+            apply = gui.add_button("Apply", icon=viser.Icon.CHECK)
+            apply.on_click(lambda _: self._apply())
+        model = self._mask_widgets["model"]
+        model.on_update(lambda _: self._model_changed())
+
+    def _widget(self, f: Field) -> Any:
+        gui = self.server.gui
+        hint = f.hint or None
+        if f.kind == "text":
+            return gui.add_text(f.label, initial_value=str(f.value), hint=hint)
+        if f.kind == "yaml":
+            return gui.add_text(f.label, initial_value=str(f.value), multiline=True, hint=hint)
+        if f.kind == "checkbox":
+            return gui.add_checkbox(f.label, initial_value=bool(f.value), hint=hint)
+        if f.kind == "dropdown":
+            opts = f.options if f.value in f.options else (*f.options, f.value)
+            return gui.add_dropdown(f.label, opts, initial_value=f.value, hint=hint)
+        step = 1 if f.kind == "int" else f.step
+        return gui.add_number(f.label, initial_value=f.value, step=step, hint=hint)
+
+    def _values(self) -> dict[str, Any]:
+        return {k: w.value for k, w in self._mask_widgets.items()}
+
+    def _model_changed(self) -> None:
+        try:
+            draft = robot_from_mask(self._draft, self._values())
+        except MaskError as err:
+            self.mask_msg.content = _error_md(str(err))
+            return
+        self._build_mask(draft)
+
+    def _apply(self) -> None:
+        name = self.selected
+        try:
+            robot = robot_from_mask(self._draft, self._values())
+            self.session.apply_robot(name, robot)
+        except ScenarioError as err:
+            self.mask_msg.content = _error_md("\n".join(err.problems))
+            return
+        except (MaskError, EditError) as err:
+            self.mask_msg.content = _error_md(str(err))
+            return
+        self.selected = robot["name"]
+        self.mask_msg.content = "<span style='color:#1e8449'>&#10004; applied</span>"
+        self._build_mask(self.session.robot_config(self.selected))
+
+    # ------------------------------------------------------------------ world tab
+    def _build_world(self) -> None:
+        gui, s = self.server.gui, self.session
+        self.edit = gui.add_checkbox(
+            "edit maze",
+            initial_value=False,
+            hint="click a floor cell to add a wall, a wall to remove it",
+        )
+        self.world_msg = gui.add_markdown("")
+        self.maze_rows = gui.add_number(
+            "rooms north-south", initial_value=5, min=1, max=200, step=1
+        )
+        self.maze_cols = gui.add_number("rooms west-east", initial_value=5, min=1, max=200, step=1)
+        self.maze_seed = gui.add_number("seed", initial_value=0, step=1)
+        rnd = gui.add_button("New random maze", icon=viser.Icon.DICE)
+        rnd.on_click(
+            lambda _: self._world_do(
+                lambda: s.random_maze(
+                    int(self.maze_rows.value), int(self.maze_cols.value), int(self.maze_seed.value)
+                )
+            )
+        )
+        up = gui.add_upload_button(
+            "Load map (txt, csv, png)", icon=viser.Icon.UPLOAD, mime_type=".txt,.csv,.png,.pgm"
+        )
+        up.on_upload(lambda _: self._world_do(lambda: s.load_grid(up.value.name, up.value.content)))
+        self.map_format = gui.add_dropdown("map format", ("txt", "csv", "png"), initial_value="txt")
+        down = gui.add_button("Save map", icon=viser.Icon.DOWNLOAD)
+        down.on_click(
+            lambda e: self._world_do(
+                lambda: e.client.send_file_download(*s.save_grid(self.map_format.value))
+            )
+        )
+
+        @self.server.scene.on_click()
+        def _(event: Any) -> None:
+            if self.edit.value:
+                self._world_do(lambda: self._click_cell(event.ray_origin, event.ray_direction))
+
+    def _world_do(self, fn: Any) -> None:
+        try:
+            fn()
+        except (EditError, ValueError) as err:
+            self.world_msg.content = _error_md(str(err))
+
+    def _click_cell(self, origin: Any, direction: Any) -> None:
+        cell = pick_cell(self.session, np.asarray(origin), np.asarray(direction))
+        if cell is None:
+            self.world_msg.content = _error_md("that click is not on the map")
+            return
+        wall = self.session.toggle_cell(*cell)
+        self.world_msg.content = f"cell {cell} is now {'a wall' if wall else 'free'}"
+
+    # ------------------------------------------------------------------ refresh
+    def refresh(self) -> None:
+        with self._gui_lock:
+            self._refresh_locked()
+
+    def _refresh_locked(self) -> None:
+        s = self.session
+        with s.lock:
+            names = s.robot_names()
+            layout = s.layout
+            st = s.sim.state
+            status = (
+                f"**t = {st.t_s:8.2f} s** &nbsp; {'playing' if s.playing else 'paused'}"
+                f" &nbsp; speed {s.speed_label}"
+            )
+            error = s.error
+        if layout != self._known_layout:
+            self._known_layout = layout
+            if self.selected not in names:
+                self.selected = names[0]
+            self.robot_pick.options = tuple(names)
+            self.robot_pick.value = self.selected
+            self._build_mask(s.robot_config(self.selected))
+            self._plot_layout = None
+            self.keyboard.value = s.keyboard_robot is not None
+        self.status.content = status + (("<br/>" + _error_md(error)) if error else "")
+        self._refresh_numbers()
+
+    def _refresh_numbers(self) -> None:
+        with self._gui_lock:
+            self._refresh_numbers_locked()
+
+    def _refresh_numbers_locked(self) -> None:
+        s = self.session
+        with s.lock:
+            sim = s.sim
+            try:
+                i = sim.robot_index(self.selected)
+            except (KeyError, ValueError):
+                return
+            spec, st = sim.robots[i], sim.state
+            wheels = list(spec.model.wheel_names)
+            ws = st.wheel_speeds[i, : len(wheels)].copy()
+            tw, pose = st.twists[i].copy(), st.poses[i].copy()
+            state = sim.active_states()[i]
+            coll = (int(st.wall_collisions[i]), int(st.robot_collisions[i]))
+            h = s.history.get(self.selected)
+            t = np.array(h.t) if h else np.zeros(0)
+            hw = np.array(h.wheels)[:, : len(wheels)] if h and len(h.wheels) else None
+            ht = np.array(h.twist) if h and len(h.twist) else None
+        rows = "".join(f"| {n} | {v:+.2f} |\n" for n, v in zip(wheels, ws, strict=True))
+        self.numbers.content = (
+            f"**{self.selected}** ({spec.model.__class__.__name__}, {spec.mode.value})\n\n"
+            f"pose x {pose[0]:.2f} m, y {pose[1]:.2f} m, heading {np.degrees(pose[2]):.1f} deg\n\n"
+            f"twist vx {tw[0]:+.2f} m/s, vy {tw[1]:+.2f} m/s, omega {tw[2]:+.2f} rad/s\n\n"
+            f"state **{state}**, collisions: walls {coll[0]}, robots {coll[1]}\n\n"
+            f"| wheel | rad/s |\n|---|---|\n{rows}"
+        )
+        if hw is None or len(t) < 2:
+            return
+        keep = t >= t[-1] - 10.0
+        t, hw, ht = t[keep], hw[keep], ht[keep]
+        key = (self.selected, tuple(wheels))
+        if self._plot_layout != key:
+            self._plot_layout = key
+            colors = ["#d62728", "#1f77b4", "#2ca02c", "#ff7f0e"]
+            gui = self.server.gui
+            for p in (self.plot_wheels, self.plot_twist):
+                if p is not None:
+                    p.remove()
+            with self._plots_tab:
+                self.plot_wheels = gui.add_uplot(
+                    (t, *hw.T),
+                    (
+                        {"label": "t (s)"},
+                        *(
+                            {"label": f"{n} (rad/s)", "stroke": colors[k % 4], "width": 2}
+                            for k, n in enumerate(wheels)
+                        ),
+                    ),
+                    title="wheel speeds (rad/s)",
+                    aspect=1.6,
+                )
+                self.plot_twist = gui.add_uplot(
+                    (t, *ht.T),
+                    (
+                        {"label": "t (s)"},
+                        {"label": "vx (m/s)", "stroke": "#444", "width": 2},
+                        {"label": "vy (m/s)", "stroke": "#999", "width": 2},
+                        {"label": "omega (rad/s)", "stroke": "#8e44ad", "width": 2},
+                    ),
+                    title="body twist",
+                    aspect=1.6,
+                )
+        else:
+            self.plot_wheels.data = (t, *hw.T)
+            self.plot_twist.data = (t, *ht.T)
+
+
+def pick_cell(session: Session, origin: np.ndarray, direction: np.ndarray):
+    """The maze cell a click ray points at: a wall whose top it crosses, else the floor cell
+    under it. None when the ray misses the map."""
+    from agvsim.app.shapes import WALL_HEIGHT_M
+
+    if abs(direction[2]) < 1e-9 or direction[2] > 0:
+        return None
+    for z in (WALL_HEIGHT_M, 0.0):
+        t = (z - origin[2]) / direction[2]
+        if t < 0:
+            continue
+        x, y = origin[0] + t * direction[0], origin[1] + t * direction[1]
+        cell = session.cell_at(x, y)
+        if cell is None:
+            continue
+        if z == 0.0 or session.sim.world.grid.occupied[cell]:
+            return cell
+    return None

@@ -1,0 +1,274 @@
+"""The 3D scene of the browser app, drawn with viser (three.js in the browser).
+
+One ``SceneView`` keeps the viewer in step with a ``Session``: the floor and the walls (one
+merged mesh, rebuilt only when the maze changes), each robot as its model (body, wheels at
+their real positions turning with their rotation and steering angles, Mecanum rollers), the
+sensor beams in the thesis's colours (green rangers, blue lidar) with their hit points, trails,
+and an optional map overlay.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import viser
+
+from agvsim.app import shapes
+from agvsim.app.session import Session
+from agvsim.world.grid import OccupancyGrid
+
+RANGER_RGB = (40, 200, 60)
+LIDAR_RGB = (40, 110, 235)
+HIT_RGB = (230, 40, 40)
+WALL_RGB = (150, 150, 160)
+
+
+def hex_rgb(color: str) -> tuple[int, int, int]:
+    c = color.lstrip("#")
+    try:
+        return (int(c[0:2], 16), int(c[2:4], 16), int(c[4:6], 16))
+    except (ValueError, IndexError):
+        return (214, 39, 40)
+
+
+@dataclass
+class _RobotNodes:
+    frame: Any
+    wheels: list[Any]
+    parts: shapes.RobotParts
+    label: Any
+
+
+class SceneView:
+    """Draws ``session`` into ``server``'s scene; call ``update()`` every frame."""
+
+    def __init__(self, server: viser.ViserServer, session: Session):
+        self.server, self.session = server, session
+        self.show_beams = True
+        self.show_trails = True
+        self.show_overlay = False
+        self.overlay: tuple[np.ndarray, float, tuple[float, float]] | None = None
+        self._layout = -1
+        self._world = -1
+        self._robots: list[_RobotNodes] = []
+        self._beams: Any = None
+        self._hits: Any = None
+        self._trails: Any = None
+        self._overlay_node: Any = None
+        self._frame = 0
+        self.frames_sent = 0
+        server.scene.set_up_direction("+z")
+        server.scene.add_light_hemisphere("/light/sky", intensity=1.2)
+        server.scene.add_light_directional("/light/sun", intensity=1.5, wxyz=(0.92, 0.2, -0.3, 0.1))
+
+    # ------------------------------------------------------------------ building
+    def _build_world(self, grid: OccupancyGrid) -> None:
+        sc = self.server.scene
+        xmin, xmax, ymin, ymax = grid.extent_m
+        w, h = xmax - xmin, ymax - ymin
+        sc.add_grid(
+            "/floor",
+            width=w,
+            height=h,
+            cell_size=grid.resolution_m if max(grid.rows, grid.cols) <= 200 else 1.0,
+            section_size=max(1.0, 5 * grid.resolution_m),
+            plane_color=(235, 235, 228),
+            plane_opacity=1.0,
+            position=((xmin + xmax) / 2, (ymin + ymax) / 2, -0.002),
+        )
+        verts, faces = shapes.wall_mesh(grid, min(shapes.WALL_HEIGHT_M, 1.0))
+        if len(faces):
+            sc.add_mesh_simple(
+                "/walls", verts, faces, color=WALL_RGB, flat_shading=True, side="double"
+            )
+        else:
+            sc.add_frame("/walls", show_axes=False)  # replaces an old mesh
+        self._draw_overlay()
+
+    def _build_robots(self) -> None:
+        sc = self.server.scene
+        for old in self._robots:
+            old.frame.remove()
+        self._robots = []
+        sim = self.session.sim
+        cfg_by_name = {r["name"]: r for r in self.session.config["robots"]}
+        for i, spec in enumerate(sim.robots):
+            parts = shapes.robot_parts(spec)
+            root = f"/robots/r{i}"
+            frame = sc.add_frame(root, show_axes=False)
+            color = hex_rgb(cfg_by_name.get(spec.name, {}).get("color", spec.color))
+            sc.add_box(
+                f"{root}/body",
+                color=color,
+                dimensions=parts.body_size_m,
+                position=parts.body_center_m,
+            )
+            # a nose marks the front
+            bx, _, bz = parts.body_center_m
+            sc.add_box(
+                f"{root}/nose",
+                color=(250, 250, 250),
+                dimensions=(0.06, parts.body_size_m[1] * 0.5, 0.02),
+                position=(bx + parts.body_size_m[0] / 2 - 0.05, 0.0, bz + shapes.BODY_HEIGHT_M / 2),
+            )
+            wheels = []
+            for k, wp in enumerate(parts.wheels):
+                node = sc.add_frame(
+                    f"{root}/w{k}", show_axes=False, position=(wp.x_m, wp.y_m, wp.radius_m)
+                )
+                sc.add_cylinder(
+                    f"{root}/w{k}/tyre",
+                    radius=wp.radius_m,
+                    height=wp.width_m,
+                    color=(40, 40, 40),
+                    radial_segments=20,
+                )
+                # a spoke shows the rotation
+                sc.add_box(
+                    f"{root}/w{k}/spoke",
+                    color=(235, 200, 40),
+                    dimensions=(wp.radius_m * 1.6, wp.radius_m * 0.25, wp.width_m * 1.05),
+                )
+                if wp.rollers:
+                    for j in range(8):
+                        a = 2 * np.pi * j / 8
+                        q = shapes.quat_mul(
+                            shapes.quat_z(a),
+                            np.array([np.cos(np.pi / 8), np.sin(np.pi / 8) * wp.rollers, 0, 0]),
+                        )
+                        sc.add_box(
+                            f"{root}/w{k}/roller{j}",
+                            color=(120, 120, 130),
+                            dimensions=(wp.radius_m * 0.25, wp.radius_m * 0.18, wp.width_m * 1.2),
+                            position=(wp.radius_m * np.cos(a), wp.radius_m * np.sin(a), 0.0),
+                            wxyz=q,
+                        )
+                wheels.append(node)
+            label = sc.add_label(
+                f"{root}/label", spec.name, position=(0.0, 0.0, 0.8), font_screen_scale=0.8
+            )
+            self._robots.append(_RobotNodes(frame, wheels, parts, label))
+        self._beams = None
+        self._hits = None
+
+    def _draw_overlay(self) -> None:
+        if self._overlay_node is not None:
+            self._overlay_node.remove()
+            self._overlay_node = None
+        if not self.show_overlay:
+            return
+        if self.overlay is not None:
+            img, res, origin = self.overlay
+        else:
+            g = self.session.sim.world.grid
+            img = np.where(g.occupied, 0.0, 1.0)
+            res, origin = g.resolution_m, g.origin_xy_m
+        rgb = (np.clip(img, 0, 1)[..., None] * np.array([120, 200, 255]) + 30).astype(np.uint8)
+        h, w = img.shape
+        self._overlay_node = self.server.scene.add_image(
+            "/overlay",
+            rgb,
+            render_width=w * res,
+            render_height=h * res,
+            position=(origin[0] + w * res / 2, origin[1] + h * res / 2, 0.01),
+            format="png",
+        )
+
+    def set_overlay(self, occupancy: np.ndarray | None, res: float = 1.0, origin=(0.0, 0.0)):
+        """Show a map on the floor (e.g. the SLAM map: 0 occupied .. 1 free, row 0 north);
+        ``None`` shows the world's own grid."""
+        self.overlay = None if occupancy is None else (np.asarray(occupancy), res, tuple(origin))
+        self._draw_overlay()
+
+    # ------------------------------------------------------------------ every frame
+    def update(self) -> None:
+        s = self.session
+        with s.lock:
+            sim = s.sim
+            layout, world = s.layout, s.world_version
+            st = sim.state
+            poses = st.poses.copy()
+            wheel_angles = st.wheel_angles.copy()
+            steer = st.steer_angles.copy()
+            scans = st.scans.copy()
+            table = sim.sensors
+            grid = sim.world.grid
+            trails = [np.array(h.trail) for h in s.history.values()] if self.show_trails else []
+            kinds = _sensor_kinds(s.config, table)
+        with self.server.atomic():
+            if world != self._world or layout != self._layout:
+                if world != self._world:
+                    self._build_world(grid)
+                    self._world = world
+                if layout != self._layout:
+                    self._build_robots()
+                    self._layout = layout
+            for i, nodes in enumerate(self._robots):
+                x, y, th = poses[i]
+                nodes.frame.position = (x, y, 0.0)
+                nodes.frame.wxyz = shapes.quat_z(th)
+                q = shapes.wheel_quaternions(nodes.parts, wheel_angles[i], steer[i])
+                for k, node in enumerate(nodes.wheels):
+                    node.wxyz = q[k]
+            self._update_beams(table, poses, scans, kinds)
+            if self._frame % 10 == 0:
+                self._update_trails(trails)
+        self._frame += 1
+        self.frames_sent += 1
+
+    def _update_beams(self, table, poses, scans, kinds) -> None:
+        sc = self.server.scene
+        if not self.show_beams or table.count == 0:
+            if self._beams is not None:
+                self._beams.visible = False
+                self._hits.visible = False
+            return
+        seg, slot, hit = shapes.beam_segments(table, poses, scans)
+        colors = np.where(kinds[slot][:, None], LIDAR_RGB, RANGER_RGB).astype(np.uint8)
+        colors = np.repeat(colors[:, None, :], 2, axis=1)
+        pts = seg.astype(np.float32)
+        hits = pts[hit, 1] if hit.any() else np.zeros((1, 3), np.float32) - 100
+        if self._beams is None or len(self._beams.points) != len(pts):
+            self._beams = sc.add_line_segments(
+                "/beams", pts, colors, thickness=1.0, thickness_units="screen"
+            )
+            self._hits = sc.add_point_cloud(
+                "/hits", hits, colors=HIT_RGB, point_size=0.06, point_shape="circle"
+            )
+        else:
+            self._beams.points = pts
+            self._beams.colors = colors
+            self._hits.points = hits
+        self._beams.visible = True
+        self._hits.visible = True
+
+    def _update_trails(self, trails: list[np.ndarray]) -> None:
+        segs = []
+        for t in trails:
+            if len(t) >= 2:
+                t = t[:: max(1, len(t) // 1500)]
+                p = np.column_stack([t, np.full(len(t), 0.02)])
+                segs.append(np.stack([p[:-1], p[1:]], axis=1))
+        if not segs:
+            if self._trails is not None:
+                self._trails.visible = False
+            return
+        pts = np.concatenate(segs).astype(np.float32)
+        # re-added (same name replaces): the number of segments changes
+        self._trails = self.server.scene.add_line_segments(
+            "/trails", pts, colors=(90, 90, 90), thickness=2.0, thickness_units="screen"
+        )
+
+
+def _sensor_kinds(config: dict, table) -> np.ndarray:
+    """(S,) True for a lidar slot, False for the rangers (they draw green)."""
+    kinds = []
+    for r in config["robots"]:
+        for s in r.get("sensors", []):
+            kinds.append(s.get("type") == "lidar")
+    out = np.array(kinds, dtype=bool)
+    if len(out) != table.count:  # config and sim out of step for a moment: colour by beams
+        out = np.array([sp.num_beams > 8 for sp in table.specs], dtype=bool)
+    return out

@@ -1,0 +1,185 @@
+"""``agvsim serve``: the browser app. One simulation, any number of browser tabs watching it.
+
+Three loops: viser's server threads (GUI callbacks, client connections), a stepping thread
+that keeps the simulation at the chosen speed, and the drawing loop that sends the scene to
+every tab ``fps`` times a second. A tab that closes or reconnects only leaves or joins the
+audience; the simulation never waits for a browser.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agvsim.app.session import Session
+from agvsim.scenario import Scenario, load_scenario
+
+log = logging.getLogger("agvsim.app")
+
+
+@dataclass
+class AppStats:
+    """Measured rates: frames drawn per second, simulated seconds per wall second."""
+
+    frames: int = 0
+    steps: int = 0
+    started: float = field(default_factory=time.perf_counter)
+    frame_times: list[float] = field(default_factory=list)
+
+
+class App:
+    """The running app. ``start()`` returns at once; ``stop()`` ends every loop."""
+
+    def __init__(
+        self,
+        session: Session,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        fps: float = 40.0,
+        verbose: bool = False,
+    ):
+        import viser
+
+        from agvsim.app.panel import Panel
+        from agvsim.app.scene import SceneView
+
+        self.session, self.fps = session, fps
+        self.server = viser.ViserServer(host=host, port=port, verbose=verbose)
+        self.server.gui.set_panel_label("agvsim")
+        self.scene = SceneView(self.server, session)
+        self.panel = Panel(self.server, session, self.scene)
+        self.stats = AppStats()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.server.on_client_connect(self._connected)
+        self.server.on_client_disconnect(self._disconnected)
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()
+
+    def _connected(self, client) -> None:
+        self.panel._set_view(client, self.panel.view.value)
+
+    def _disconnected(self, client) -> None:
+        self.panel.view_of.pop(client.client_id, None)
+        if not self.server.get_clients():
+            # nobody is watching the keyboard robot any more: it stops (a dead-man switch)
+            self.session.stop_keyboard_motion()
+
+    # ------------------------------------------------------------------ loops
+    def _step_loop(self) -> None:
+        last = time.perf_counter()
+        while not self._stop.is_set():
+            now = time.perf_counter()
+            try:
+                n = self.session.advance(now - last)
+            except Exception:  # the session pauses on controller errors; anything else: log
+                log.exception("stepping the simulation failed")
+                self.session.pause()
+                n = 0
+            last = now
+            self.stats.steps += n
+            if n == 0:
+                time.sleep(0.004)
+            else:
+                time.sleep(0.0005)  # let the drawing loop and the GUI take the lock
+
+    def _draw_loop(self) -> None:
+        period = 1.0 / self.fps
+        next_refresh = 0.0
+        nxt = time.perf_counter()
+        while not self._stop.is_set():
+            t0 = time.perf_counter()
+            try:
+                self.scene.update()
+                self.panel.follow()
+                if t0 >= next_refresh:
+                    self.panel.refresh()
+                    next_refresh = t0 + 0.2
+            except Exception:  # a drawing fault must not freeze the app: log it, go on
+                log.exception("drawing the scene failed")
+                time.sleep(0.2)
+            self.stats.frames += 1
+            self.stats.frame_times.append(t0)
+            if len(self.stats.frame_times) > 2000:
+                del self.stats.frame_times[:1000]
+            nxt += period
+            delay = nxt - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                nxt = time.perf_counter()
+
+    def start(self) -> App:
+        for target in (self._step_loop, self._draw_loop):
+            t = threading.Thread(target=target, daemon=True, name=target.__name__)
+            t.start()
+            self._threads.append(t)
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self.server.stop()
+
+    def frame_rate(self, window_s: float = 2.0) -> float:
+        """Frames drawn per second over the last ``window_s`` seconds."""
+        ft = self.stats.frame_times
+        now = time.perf_counter()
+        recent = [t for t in ft if t >= now - window_s]
+        return len(recent) / window_s
+
+
+def open_session(scenario: str | Path | Scenario | None) -> Session:
+    if scenario is None:
+        from agvsim.scenario import parse_scenario
+
+        default = Path(__file__).resolve().parents[3] / "scenarios" / "thesis_maze_avoid.yaml"
+        if default.is_file():
+            return Session(load_scenario(default), str(default))
+        sc = parse_scenario(
+            {
+                "name": "thesis maze",
+                "world": {"maze": "thesis_c1"},
+                "robots": [
+                    {
+                        "name": "agv",
+                        "model": "differential",
+                        "sensors": [{"type": "rangers"}],
+                        "controller": {"type": "avoid"},
+                    }
+                ],
+            }
+        )
+        return Session(sc, "built-in scenario")
+    if isinstance(scenario, Scenario):
+        return Session(scenario)
+    return Session(load_scenario(scenario), str(scenario))
+
+
+def serve(
+    scenario: str | Path | Scenario | None = None,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    play: bool = False,
+    on_ready: Callable[[App], None] | None = None,
+) -> None:
+    """Run the app until Ctrl-C."""
+    app = App(open_session(scenario), host=host, port=port).start()
+    if play:
+        app.session.play()
+    if on_ready is not None:
+        on_ready(app)
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()

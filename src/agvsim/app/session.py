@@ -1,0 +1,528 @@
+"""The live simulation behind the browser app, with no browser in it.
+
+A ``Session`` owns the scenario being edited (a plain dict, validated by the scenario schema on
+every change), the running ``Simulation`` and the run controls. Every method is safe to call
+from any thread (the viewer's GUI callbacks arrive on the server's threads, the stepping runs on
+its own): one lock guards the simulation. Nothing here imports the viewer, so the whole app
+logic is tested without a browser.
+
+Editing a robot ("apply" in the mask) rebuilds the simulation from the edited scenario and
+carries over the live state of every *other* robot (pose, odometry, wheel angles, counters) and
+the clock; the edited robot restarts at the pose given in the mask. Editing the maze changes
+the live simulation in place.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from agvsim.control.teleop import Teleop
+from agvsim.scenario import Scenario, ScenarioError, build, parse_scenario
+from agvsim.sim.engine import ControllerError, Simulation
+from agvsim.world import loaders, mazes
+from agvsim.world.grid import OccupancyGrid
+
+#: run speeds offered by the app: label -> simulated seconds per wall-clock second
+SPEEDS: dict[str, float | None] = {"real time": 1.0, "x2": 2.0, "x10": 10.0, "max": None}
+#: seconds of history kept for the live plots, and samples of trail kept per robot
+PLOT_WINDOW_S = 10.0
+TRAIL_POINTS = 4000
+KEY_STEP = {"linear": 0.1, "lateral": 0.1, "turn": 0.25}  # per key press: m/s, m/s, rad/s
+KEY_LIMIT = {"linear": 2.0, "lateral": 2.0, "turn": 3.0}
+
+
+class EditError(ValueError):
+    """An edit the app refuses; the message is shown in the panel as it is."""
+
+
+@dataclass
+class History:
+    """Recent samples of one robot for the plots: time, wheel speeds, body twist."""
+
+    t: deque = field(default_factory=lambda: deque(maxlen=2000))
+    wheels: deque = field(default_factory=lambda: deque(maxlen=2000))
+    twist: deque = field(default_factory=lambda: deque(maxlen=2000))
+    trail: deque = field(default_factory=lambda: deque(maxlen=TRAIL_POINTS))
+
+
+class Session:
+    """A scenario being run and edited. ``layout`` increases whenever the set of robots, their
+    build or the world changes, so a viewer knows when to rebuild its scene."""
+
+    def __init__(self, scenario: Scenario, source: str = "scenario", allow_python: bool = True):
+        self.source = source
+        self.base_dir = scenario._base_dir
+        self.allow_python = allow_python
+        self.config: dict[str, Any] = scenario.model_dump(mode="json", exclude_unset=True)
+        self.lock = threading.RLock()
+        self.playing = False
+        self.speed_label = "real time"
+        self.error: str | None = None  # the last controller error (the run pauses on it)
+        self.layout = 0
+        self.world_version = 0
+        self.keyboard_robot: str | None = None
+        self._saved_controller: dict[str, Any] | None = None
+        self._key_twist = np.zeros(3)
+        self._budget_s = 0.0
+        self.sim: Simulation = self._build(self.config)
+        self._reset_history()
+
+    # ------------------------------------------------------------------ building
+    def _scenario(self, cfg: dict[str, Any]) -> Scenario:
+        sc = parse_scenario(copy.deepcopy(cfg), self.source)
+        sc._base_dir = self.base_dir
+        sc._source = self.source
+        if not self.allow_python:
+            for r in sc.robots:
+                if r.controller.type == "python":
+                    raise ScenarioError(
+                        self.source,
+                        [
+                            f"robot {r.name!r}: python controllers cannot be loaded from the "
+                            "browser; start the app with that scenario on the command line"
+                        ],
+                    )
+        return sc
+
+    def _build(self, cfg: dict[str, Any]) -> Simulation:
+        return build(self._scenario(cfg))
+
+    def _reset_history(self) -> None:
+        self.history = {r.name: History() for r in self.sim.robots}
+        self._sample()
+
+    def _replace(self, cfg: dict[str, Any], fresh: set[str] = frozenset()) -> None:  # type: ignore[assignment]
+        """Rebuild from ``cfg``; robots not in ``fresh`` keep their live state."""
+        new = self._build(cfg)
+        old = self.sim
+        st, ost = new.state, old.state
+        for i, r in enumerate(new.robots):
+            if r.name in fresh:
+                continue
+            try:
+                j = old.robot_index(r.name)
+            except (KeyError, ValueError):
+                continue
+            for name in (
+                "poses",
+                "odom_poses",
+                "wheel_angles",
+                "distance_m",
+                "collisions",
+                "wall_collisions",
+                "robot_collisions",
+            ):
+                getattr(st, name)[i] = getattr(ost, name)[j]
+        st.t_s, st.step = ost.t_s, ost.step
+        new._sense(force=True)
+        self.config, self.sim = cfg, new
+        old_hist = self.history
+        self.history = {
+            r.name: (History() if r.name in fresh else old_hist.get(r.name, History()))
+            for r in new.robots
+        }
+        self.layout += 1
+
+    # ------------------------------------------------------------------ run controls
+    def play(self) -> None:
+        with self.lock:
+            self.playing, self.error = True, None
+            self._budget_s = 0.0
+
+    def pause(self) -> None:
+        with self.lock:
+            self.playing = False
+
+    def set_speed(self, label: str) -> None:
+        if label not in SPEEDS:
+            raise EditError(f"unknown speed {label!r}; choose one of {', '.join(SPEEDS)}")
+        with self.lock:
+            self.speed_label, self._budget_s = label, 0.0
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` steps now (the single-step button), playing or not."""
+        with self.lock:
+            for _ in range(n):
+                if not self._step_once():
+                    break
+
+    def reset(self) -> None:
+        """Back to the scenario's initial poses and t = 0 (edits are kept)."""
+        with self.lock:
+            self.sim = self._build(self.config)
+            self.error = None
+            self.layout += 1
+            self._reset_history()
+
+    def _step_once(self) -> bool:
+        self._feed_keyboard()
+        try:
+            self.sim.step()
+        except ControllerError as err:
+            self.playing, self.error = False, str(err)
+            return False
+        self._sample()
+        return True
+
+    def advance(self, wall_dt_s: float, max_work_s: float = 0.03) -> int:
+        """Called by the stepping thread: run the steps due after ``wall_dt_s`` of wall time at
+        the chosen speed, spending at most ``max_work_s`` of work. Returns steps taken."""
+        with self.lock:
+            if not self.playing:
+                return 0
+            speed = SPEEDS[self.speed_label]
+            dt = self.sim.dt_s
+            if speed is not None:
+                # never bank more than a quarter second: a stall must not cause a burst
+                self._budget_s = min(self._budget_s + wall_dt_s * speed, 0.25 * speed)
+            t0, taken = time.perf_counter(), 0
+            while speed is None or self._budget_s >= dt * (1.0 - 1e-9):
+                if not self._step_once():
+                    break
+                taken += 1
+                if speed is not None:
+                    self._budget_s -= dt
+                if time.perf_counter() - t0 > max_work_s:
+                    break
+            return taken
+
+    def _sample(self) -> None:
+        st = self.sim.state
+        k = st.step
+        every = max(1, int(round(0.05 / self.sim.dt_s)))  # plots at 20 Hz of sim time
+        if k % every:
+            return
+        for i, r in enumerate(self.sim.robots):
+            h = self.history.get(r.name)
+            if h is None:
+                continue
+            h.t.append(st.t_s)
+            h.wheels.append(st.wheel_speeds[i].copy())
+            h.twist.append(st.twists[i].copy())
+            h.trail.append((float(st.poses[i, 0]), float(st.poses[i, 1])))
+
+    # ------------------------------------------------------------------ robots
+    def robot_names(self) -> list[str]:
+        with self.lock:
+            return [r["name"] for r in self.config["robots"]]
+
+    def robot_config(self, name: str) -> dict[str, Any]:
+        with self.lock:
+            return copy.deepcopy(self.config["robots"][self._index(name)])
+
+    def _index(self, name: str) -> int:
+        for k, r in enumerate(self.config["robots"]):
+            if r["name"] == name:
+                return k
+        raise EditError(f"no robot named {name!r}; robots: {self.robot_names()}")
+
+    def apply_robot(self, name: str, robot: dict[str, Any]) -> None:
+        """Replace robot ``name`` with ``robot`` (the mask's "apply"): validated like a scenario
+        file, the robot rebuilt at ``robot['pose']``, the others carry on. Raises ScenarioError
+        with the validation messages; nothing changes then."""
+        with self.lock:
+            cfg = copy.deepcopy(self.config)
+            k = self._index(name)
+            cfg["robots"][k] = copy.deepcopy(robot)
+            if self.keyboard_robot == name and robot.get("name") != name:
+                raise EditError("stop keyboard driving before renaming this robot")
+            self._replace(cfg, fresh={robot.get("name", name)})
+
+    def add_robot(self, model: str, x_m: float, y_m: float, theta_deg: float = 0.0) -> str:
+        """A new robot of ``model`` with the four rangers and the thesis avoidance."""
+        with self.lock:
+            names = set(self.robot_names())
+            n = 1
+            while f"{model}_{n}" in names:
+                n += 1
+            name = f"{model}_{n}"
+            cfg = copy.deepcopy(self.config)
+            cfg["robots"].append(
+                {
+                    "name": name,
+                    "model": model,
+                    "pose": {"x_m": x_m, "y_m": y_m, "theta_deg": theta_deg},
+                    "color": PALETTE[len(cfg["robots"]) % len(PALETTE)],
+                    "sensors": [{"type": "rangers"}],
+                    "controller": {"type": "avoid"},
+                }
+            )
+            self._replace(cfg, fresh={name})
+            return name
+
+    def remove_robot(self, name: str) -> None:
+        with self.lock:
+            if len(self.config["robots"]) == 1:
+                raise EditError("a scenario needs at least one robot; add another first")
+            cfg = copy.deepcopy(self.config)
+            del cfg["robots"][self._index(name)]
+            for r in cfg["robots"]:
+                if name in r.get("knows", []):
+                    r["knows"] = [o for o in r["knows"] if o != name]
+            if self.keyboard_robot == name:
+                self.keyboard_robot, self._saved_controller = None, None
+            self._replace(cfg)
+
+    def free_spot(self, seed: int = 0) -> tuple[float, float]:
+        """The centre of a free cell with free neighbours (for new robots), or ValueError."""
+        with self.lock:
+            g = self.sim.world.grid
+            occ = g.occupied
+            free = ~occ
+            ok = free.copy()
+            ok[1:, :] &= free[:-1, :]
+            ok[:-1, :] &= free[1:, :]
+            ok[:, 1:] &= free[:, :-1]
+            ok[:, :-1] &= free[:, 1:]
+            rows, cols = np.nonzero(ok)
+            if len(rows) == 0:
+                raise EditError("no free spot in the map for a new robot")
+            fp = self.sim.footprints(self.sim.state.poses)
+            rng = np.random.default_rng(seed)
+            for k in rng.permutation(len(rows)):
+                x, y = g.cell_center(rows[k], cols[k])
+                if np.all(np.hypot(fp[:, 0] - x, fp[:, 1] - y) > 1.5):
+                    return float(x), float(y)
+            raise EditError("no free spot away from the other robots")
+
+    # ------------------------------------------------------------------ keyboard driving
+    def set_keyboard(self, name: str | None) -> None:
+        """Drive robot ``name`` from the keyboard (its controller is swapped for a teleop
+        controller until keyboard driving stops); ``None`` gives it its controller back."""
+        with self.lock:
+            cfg = copy.deepcopy(self.config)
+            if self.keyboard_robot is not None:
+                k = self._index(self.keyboard_robot)
+                cfg["robots"][k]["controller"] = self._saved_controller or {"type": "idle"}
+            prev, self.keyboard_robot = self.keyboard_robot, None
+            self._key_twist[:] = 0.0
+            if name is not None:
+                k = self._index(name)
+                self._saved_controller = cfg["robots"][k].get("controller", {"type": "idle"})
+                cfg["robots"][k]["controller"] = {"type": "teleop", "clock": "wall"}
+            try:
+                self._replace(cfg)
+            except ScenarioError:
+                self.keyboard_robot = prev
+                raise
+            self.keyboard_robot = name
+
+    def key(self, name: str) -> tuple[float, float, float]:
+        """One key press for the keyboard robot: up/down add forward speed, left/right turn
+        rate, q/e sideways speed (holonomic robots), space stops. The command holds until the
+        next key (the app stops it when its browser tab goes away)."""
+        k = name.strip().lower()
+        k = {"w": "up", "s": "down", "a": "left", "d": "right", " ": "space", "x": "space"}.get(
+            k, k.removeprefix("arrow")
+        )
+        steps = {
+            "up": (0, KEY_STEP["linear"]),
+            "down": (0, -KEY_STEP["linear"]),
+            "q": (1, KEY_STEP["lateral"]),
+            "e": (1, -KEY_STEP["lateral"]),
+            "left": (2, KEY_STEP["turn"]),
+            "right": (2, -KEY_STEP["turn"]),
+        }
+        with self.lock:
+            if k == "space":
+                self._key_twist[:] = 0.0
+            elif k in steps:
+                axis, step = steps[k]
+                lim = (KEY_LIMIT["linear"], KEY_LIMIT["lateral"], KEY_LIMIT["turn"])[axis]
+                self._key_twist[axis] = float(np.clip(self._key_twist[axis] + step, -lim, lim))
+                self._key_twist[axis] = round(self._key_twist[axis], 6)
+            else:
+                raise EditError(f"unknown key {name!r}; use arrows/WASD, q/e and space")
+            return tuple(float(v) for v in self._key_twist)  # type: ignore[return-value]
+
+    def stop_keyboard_motion(self) -> None:
+        with self.lock:
+            self._key_twist[:] = 0.0
+
+    def _teleop(self) -> Teleop | None:
+        if self.keyboard_robot is None:
+            return None
+        i = self.sim.robot_index(self.keyboard_robot)
+        for b in self.sim.bindings:
+            if i in b.robots and isinstance(b.controller, Teleop):
+                return b.controller
+        return None
+
+    def _feed_keyboard(self) -> None:
+        tele = self._teleop()
+        if tele is not None:
+            vx, vy, om = self._key_twist
+            if vx == vy == om == 0.0:
+                tele.stop()
+            else:
+                tele.set_twist(vx, vy, om)
+
+    # ------------------------------------------------------------------ the maze
+    def cell_at(self, x_m: float, y_m: float) -> tuple[int, int] | None:
+        with self.lock:
+            g = self.sim.world.grid
+            r, c = g.cell_of(x_m, y_m)
+            r, c = int(r), int(c)
+            if 0 <= r < g.rows and 0 <= c < g.cols:
+                return r, c
+            return None
+
+    def toggle_cell(self, row: int, col: int) -> bool:
+        """Flip one cell; returns whether it is now a wall. Refused under a robot."""
+        with self.lock:
+            g = self.sim.world.grid
+            if not (0 <= row < g.rows and 0 <= col < g.cols):
+                raise EditError(f"cell ({row}, {col}) is outside the {g.rows} x {g.cols} map")
+            wall = not bool(g.occupied[row, col])
+            new = g.with_cell(row, col, wall)
+            if wall:
+                hit = self.sim.collider.__class__(new).hit_walls(
+                    self.sim.footprints(self.sim.state.poses)
+                )
+                if hit.any():
+                    who = [r.name for r, h in zip(self.sim.robots, hit, strict=True) if h]
+                    raise EditError(f"cell ({row}, {col}) is under robot {who[0]!r}")
+            self._set_grid(new)
+            return wall
+
+    def set_grid(self, grid: OccupancyGrid, move_robots: bool = True) -> None:
+        """A whole new map (random maze, loaded file). Robots whose start or current pose is
+        now inside a wall are moved to free cells."""
+        with self.lock:
+            self._set_grid(grid)
+            if move_robots:
+                self._unstick_robots()
+
+    def random_maze(self, rows: int, cols: int, seed: int) -> None:
+        with self.lock:
+            res = self.sim.world.grid.resolution_m
+            cells = max(1, int(round(1.0 / res))) if res < 1 else 1
+            try:
+                g = mazes.random_maze(
+                    rows, cols, seed, corridor_cells=2 * cells, wall_cells=cells, resolution_m=res
+                )
+            except ValueError as err:
+                raise EditError(f"random maze: {err}") from None
+            self.set_grid(g)
+
+    def _set_grid(self, grid: OccupancyGrid) -> None:
+        self.sim.set_grid(grid)
+        world = dict(self.config["world"])
+        for k in ("maze", "matrix", "picture", "file", "random"):
+            world.pop(k, None)
+        world["picture"] = loaders.format_text_picture(grid)
+        world["cell_size_m"] = grid.resolution_m
+        world["origin_xy_m"] = list(grid.origin_xy_m)
+        self.config = {**self.config, "world": world}
+        self.world_version += 1
+
+    def _unstick_robots(self) -> None:
+        sim = self.sim
+        fp = sim.footprints(sim.state.poses)
+        stuck = sim.collider.hit_walls(fp)
+        cfg = copy.deepcopy(self.config)
+        moved = False
+        for i, r in enumerate(sim.robots):
+            rc = cfg["robots"][i]
+            x0, y0, th0 = r.initial_pose
+            at_start = sim.state.poses.copy()
+            at_start[i] = (x0, y0, th0)
+            start_bad = bool(sim.collider.hit_walls(sim.footprints(at_start))[i])
+            if stuck[i] or start_bad:
+                x, y = self.free_spot(seed=i + 17 * self.world_version)
+                sim.state.poses[i] = (x, y, sim.state.poses[i, 2])
+                sim.state.odom_poses[i] = sim.state.poses[i]
+                fp = sim.footprints(sim.state.poses)
+                if start_bad:
+                    rc["pose"] = {**rc.get("pose", {}), "x_m": x, "y_m": y}
+                    moved = True
+        if moved:
+            self._replace(cfg)
+
+    def save_grid(self, fmt: str) -> tuple[str, bytes]:
+        """The map as a file to download: (file name, bytes) for fmt txt, csv or png."""
+        import tempfile
+
+        savers = {"txt": loaders.save_text, "csv": loaders.save_csv, "png": loaders.save_png}
+        if fmt not in savers:
+            raise EditError(f"unknown map format {fmt!r}; choose txt, csv or png")
+        with self.lock:
+            grid = self.sim.world.grid
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / f"maze.{fmt}"
+            savers[fmt](grid, path)
+            return path.name, path.read_bytes()
+
+    def load_grid(self, name: str, content: bytes) -> None:
+        """A map file sent from the browser (txt, csv, png, pgm): read as data, never run."""
+        import tempfile
+
+        suffix = Path(name).suffix.lower()
+        if suffix not in (".txt", ".csv", ".png", ".pgm"):
+            raise EditError(f"{name}: maps load from .txt, .csv, .png or .pgm files")
+        with self.lock:
+            res = self.sim.world.grid.resolution_m
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / Path(name).name
+            path.write_bytes(content)
+            try:
+                grid = loaders.load_map(path, resolution_m=res)
+            except (loaders.MapFormatError, ValueError) as err:
+                raise EditError(str(err).replace(str(path), name)) from None
+        self.set_grid(grid)
+
+    # ------------------------------------------------------------------ scenario files
+    def scenario_yaml(self) -> str:
+        """The current setup (edits included) as a scenario file."""
+        with self.lock:
+            cfg = copy.deepcopy(self.config)
+        if self.keyboard_robot is not None and self._saved_controller is not None:
+            k = [r["name"] for r in cfg["robots"]].index(self.keyboard_robot)
+            cfg["robots"][k]["controller"] = self._saved_controller
+        return yaml.dump(cfg, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=100)
+
+    def load_yaml(self, text: str, source: str = "uploaded scenario") -> None:
+        """Replace everything with a scenario file's content (YAML is parsed as data only)."""
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise ScenarioError(source, [f"not valid YAML ({err})"]) from None
+        if not isinstance(data, dict):
+            raise ScenarioError(source, ["the file must hold a mapping of keys"])
+        with self.lock:
+            saved = self.source
+            self.source = source
+            try:
+                sim = self._build(data)
+            finally:
+                self.source = saved
+            self.config, self.sim = data, sim
+            self.keyboard_robot, self._saved_controller = None, None
+            self.playing, self.error = False, None
+            self.layout += 1
+            self.world_version += 1
+            self._reset_history()
+
+
+PALETTE = ["#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf"]
+
+
+class _Dumper(yaml.SafeDumper):
+    """Multi-line strings (the maze picture) as literal blocks."""
+
+
+def _str_presenter(dumper: yaml.SafeDumper, data: str) -> yaml.Node:
+    style = "|" if "\n" in data else None
+    return dumper.represent_scalar("tag:yaml.org,2002:str", data, style=style)
+
+
+_Dumper.add_representer(str, _str_presenter)

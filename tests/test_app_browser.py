@@ -1,0 +1,228 @@
+"""End-to-end: the browser app in a real headless Chromium, driven by Playwright.
+
+Needs Debian's chromium at /usr/bin/chromium (``.ci/run`` installs it). Without it these tests
+are skipped, unless AGVSIM_REQUIRE_BROWSER=1 (CI sets it), which turns the skip into a failure.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+ROOM = """\
+name: room
+world:
+  picture: |
+    #########
+    #.......#
+    #.......#
+    #.......#
+    #.......#
+    #.......#
+    #.......#
+    #.......#
+    #########
+robots:
+  - name: agv
+    model: differential
+    mode: forward
+    pose: {x_m: -2.0, y_m: 0.0, theta_deg: 0.0}
+    sensors: [{type: lidar, beams: 8, range_max_m: 10.0, rate_hz: 50}]
+    controller: {type: script, steps: [{duration_s: 100, wheels: [5.0, 5.0]}]}
+"""
+
+
+def _need_browser() -> None:
+    missing = []
+    if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
+        missing.append("Debian's chromium (apt-get install -y chromium)")
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        missing.append("playwright (pip install -e '.[test]')")
+    if missing:
+        why = "browser tests need " + " and ".join(missing)
+        if os.environ.get("AGVSIM_REQUIRE_BROWSER") == "1":
+            pytest.fail(why)
+        pytest.skip(why)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def app(tmp_path_factory):
+    _need_browser()
+    from agvsim.app.server import App, open_session
+
+    path = tmp_path_factory.mktemp("app") / "room.yaml"
+    path.write_text(ROOM)
+    a = App(open_session(path), port=_free_port()).start()
+    yield a
+    a.stop()
+
+
+@pytest.fixture(scope="module")
+def page(app):
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        pg = browser.new_page(viewport={"width": 1280, "height": 800})
+        pg.errors = []  # type: ignore[attr-defined]
+        pg.outside = []  # type: ignore[attr-defined]
+        pg.on("console", lambda m: m.type == "error" and pg.errors.append(m.text))
+        pg.on("pageerror", lambda e: pg.errors.append(str(e)))
+        pg.on(
+            "request",
+            lambda r: (
+                not r.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:"))
+                and pg.outside.append(r.url)
+            ),
+        )
+        pg.goto(f"http://127.0.0.1:{app.port}/")
+        pg.get_by_role("tab", name="Run").wait_for(timeout=30000)
+        pg.wait_for_timeout(1500)
+        yield pg
+        browser.close()
+
+
+def wait_for(cond, timeout_s: float = 15.0, what: str = "condition") -> None:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        if cond():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def canvas_shot(page) -> np.ndarray:
+    from PIL import Image
+
+    canvases = page.locator("canvas")
+    areas = [
+        (b["width"] * b["height"], k)
+        for k in range(canvases.count())
+        if (b := canvases.nth(k).bounding_box())
+    ]
+    main = canvases.nth(max(areas)[1])
+    return np.asarray(Image.open(io.BytesIO(main.screenshot())).convert("RGB"))
+
+
+def choose(page, label: str, option: str) -> None:
+    page.get_by_label(label).first.click()
+    page.get_by_role("option", name=option, exact=True).click()
+
+
+def test_page_loads_without_errors_and_draws_the_scene(app, page):
+    img = canvas_shot(page)
+    colours = len(np.unique(img.reshape(-1, 3) // 8, axis=0))
+    assert colours > 20, f"canvas looks blank ({colours} colours)"
+    # the walls (grey) and the floor (light) both show
+    grey = np.all(np.abs(img.astype(int) - [150, 150, 160]) < 40, axis=-1).mean()
+    assert grey > 0.02
+    assert page.errors == []
+    assert page.outside == []  # works offline: nothing fetched from outside this machine
+
+
+def test_play_moves_the_robot(app, page):
+    page.get_by_role("tab", name="Run").click()
+    page.get_by_role("button", name="Reset").click()
+    wait_for(lambda: app.session.sim.state.step == 0, what="reset")
+    page.get_by_role("button", name="Play").click()
+    wait_for(lambda: app.session.sim.state.distance_m[0] > 0.2, what="the robot to move")
+    page.get_by_role("button", name="Pause").click()
+    wait_for(lambda: not app.session.playing, what="pause")
+    vx = app.session.sim.state.twists[0, 0]
+    assert vx == pytest.approx(5.0 * 0.1)  # wheels 5 rad/s, radius 0.1 m
+    assert page.errors == []
+
+
+def test_wheel_radius_in_the_panel_changes_the_motion(app, page):
+    page.get_by_role("tab", name="Run").click()
+    page.get_by_role("button", name="Reset").click()
+    page.get_by_role("tab", name="Robot").click()
+    field = page.get_by_label("wheel_radius_m")
+    field.fill("0.05")
+    field.press("Enter")
+    page.wait_for_timeout(300)
+    page.get_by_role("button", name="Apply").click()
+    wait_for(
+        lambda: app.session.robot_config("agv").get("params", {}).get("wheel_radius_m") == 0.05,
+        what="the new wheel radius",
+    )
+    page.get_by_role("tab", name="Run").click()
+    page.get_by_role("button", name="Play").click()
+    wait_for(lambda: app.session.sim.state.distance_m[0] > 0.2, what="the robot to move")
+    page.get_by_role("button", name="Pause").click()
+    assert app.session.sim.state.twists[0, 0] == pytest.approx(5.0 * 0.05)
+    # an invalid value is refused in the panel with the schema's message
+    page.get_by_role("tab", name="Robot").click()
+    field = page.get_by_label("body length (m)")
+    field.fill("-1")
+    field.press("Enter")
+    page.wait_for_timeout(300)
+    page.get_by_role("button", name="Apply").click()
+    page.get_by_text("greater than 0").wait_for(timeout=5000)
+    assert app.session.robot_config("agv")["body"].get("length_m", 0.6) > 0
+    assert page.errors == []
+
+
+def test_a_maze_cell_clicked_in_the_editor_becomes_a_wall_the_lidar_sees(app, page):
+    s = app.session
+    page.get_by_role("tab", name="Run").click()
+    page.get_by_role("button", name="Reset").click()
+    choose(page, "view", "top plan")
+    page.wait_for_timeout(800)
+    page.get_by_role("tab", name="World").click()
+    page.get_by_label("edit maze").check()
+    s.step(1)
+    x = s.sim.state.poses[0, 0]
+    assert s.sim.state.scans[0, 4] == pytest.approx(3.5 - x, abs=1e-6)  # the east wall ahead
+    box = page.locator("canvas").first.bounding_box()
+    # the top view looks straight down on the map's centre: the middle cell (0, 0) m
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    wait_for(lambda: s.sim.world.grid.occupied[4, 4], what="the clicked cell to become a wall")
+    s.step(1)
+    x = s.sim.state.poses[0, 0]
+    assert s.sim.state.scans[0, 4] == pytest.approx(-0.5 - x, abs=1e-6)  # the new wall's face
+    page.get_by_text("is now a wall").wait_for(timeout=5000)
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    wait_for(lambda: not s.sim.world.grid.occupied[4, 4], what="the wall to go again")
+    page.get_by_label("edit maze").uncheck()
+    assert page.errors == []
+
+
+def test_a_second_tab_watches_and_closing_it_does_not_stop_the_run(app, page):
+    s = app.session
+    other = page.context.browser.new_page()
+    other.goto(f"http://127.0.0.1:{app.port}/")
+    other.get_by_role("tab", name="Run").wait_for(timeout=30000)
+    wait_for(lambda: len(app.server.get_clients()) == 2, what="two clients")
+    s.play()
+    other.close()
+    t0 = s.sim.state.t_s
+    wait_for(lambda: s.sim.state.t_s > t0 + 0.3, what="the run to go on")
+    s.pause()
+    wait_for(lambda: len(app.server.get_clients()) == 1, what="one client")
+    assert page.errors == []
