@@ -180,11 +180,24 @@ def test_scenario_yaml_round_trip_keeps_edits():
         other.load_yaml("name: x\nworld: {maze: thesis_c1}\nrobots: []\n")
 
 
-def test_scenarios_from_the_browser_cannot_load_python_code():
-    s = Session(parse_scenario(scenario()), "test", allow_python=False)
+def test_scenarios_from_the_browser_cannot_load_python_code(tmp_path):
+    (tmp_path / "ok.py").write_text("def controller(obs):\n    return None\n")
+    sc = parse_scenario(scenario(controller={"type": "python", "file": "ok.py"}))
+    sc._base_dir = tmp_path
+    s = Session(sc, "test")
     bad = scenario(controller={"type": "python", "file": "evil.py"})
-    with pytest.raises(ScenarioError, match="python controllers cannot be loaded"):
+    with pytest.raises(ScenarioError, match="python controllers cannot come from the browser"):
         s.load_yaml(yaml.safe_dump(bad))
+    # the mask cannot point the trusted robot at another file either
+    robot = s.robot_config("agv")
+    robot["controller"] = {"type": "python", "file": "evil.py"}
+    with pytest.raises(ScenarioError, match="cannot come from the browser"):
+        s.apply_robot("agv", robot)
+    robot["controller"] = {"type": "python", "file": "ok.py"}
+    s.apply_robot("agv", robot)  # the command line's own controller stays allowed
+    s.load_yaml(yaml.safe_dump(scenario()))  # after a browser upload, none is trusted
+    with pytest.raises(ScenarioError, match="cannot come from the browser"):
+        s.apply_robot("agv", robot)
     assert "python" not in controller_types(allow_python=False)
 
 

@@ -167,11 +167,23 @@ def validate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file."
 def bench(
     quick: Annotated[bool, typer.Option("--quick", help="Short version (under a minute).")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    app_only: Annotated[
+        bool,
+        typer.Option("--app", help="Only the browser app: 10 robots, 240-beam lidars, frames/s."),
+    ] = False,
 ) -> None:
-    """Measure ray-casting throughput, steps/s and real-time factor for 1, 100, 1000 robots."""
-    from agvsim.bench import run_benchmarks
+    """Measure ray-casting throughput, steps/s and real-time factor for 1, 100, 1000 robots
+    (or, with --app, the browser app's frame rate)."""
+    if app_only:
+        from agvsim.bench_app import run_app_benchmark
 
-    result = run_benchmarks(quick=quick, log=None if as_json else err.print)
+        result = run_app_benchmark(
+            seconds=5.0 if quick else 10.0, log=None if as_json else err.print
+        )
+    else:
+        from agvsim.bench import run_benchmarks
+
+        result = run_benchmarks(quick=quick, log=None if as_json else err.print)
     if as_json:
         sys.stdout.write(json.dumps(result) + "\n")
     else:

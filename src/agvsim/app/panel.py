@@ -52,24 +52,25 @@ class Panel:
         gui = server.gui
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         tabs = gui.add_tab_group()
-        run_tab, self._robot_tab = tabs.add_tab("Run"), tabs.add_tab("Robot")
-        world_tab, self._plots_tab = tabs.add_tab("World"), tabs.add_tab("Plots")
-        with run_tab:
+        self._run_tab, self._robot_tab = tabs.add_tab("Run"), tabs.add_tab("Robot")
+        world_tab = tabs.add_tab("World")
+        with self._run_tab:
             self._build_run()
+            self.numbers = gui.add_markdown("")
+            self.plot_wheels: Any = None
+            self.plot_twist: Any = None
         with self._robot_tab:
             self.robot_pick = gui.add_dropdown(
                 "robot", tuple(session.robot_names()), initial_value=self.selected
             )
             self.robot_pick.on_update(lambda _: self._select(self.robot_pick.value))
+            self._build_robots()
             self.mask_msg = gui.add_markdown("")
             self._mask_anchor = gui.add_markdown("**Mask** (apply rebuilds the robot)")
         self._build_mask(session.robot_config(self.selected))
         with world_tab:
+            self._build_files()
             self._build_world()
-        with self._plots_tab:
-            self.numbers = gui.add_markdown("")
-            self.plot_wheels: Any = None
-            self.plot_twist: Any = None
         self._known_layout = session.layout
         for key, name in KEYS.items():
             cmd = gui.add_command(f"drive: {name}", hotkey=key)  # type: ignore[arg-type]
@@ -111,18 +112,18 @@ class Panel:
                 lambda: s.set_keyboard(self.selected if self.keyboard.value else None)
             )
         )
-        self.beams = gui.add_checkbox("beams", initial_value=True)
-        self.beams.on_update(lambda _: setattr(self.scene, "show_beams", self.beams.value))
-        self.trails = gui.add_checkbox("trails", initial_value=True)
-        self.trails.on_update(lambda _: setattr(self.scene, "show_trails", self.trails.value))
-        self.overlay = gui.add_checkbox("map overlay", initial_value=False)
-        self.overlay.on_update(lambda _: self._toggle_overlay())
-        gui.add_markdown("**Robots**")
+        self.run_msg = gui.add_markdown("")
+
+    def _build_robots(self) -> None:
+        gui, s = self.server.gui, self.session
         self.new_model = gui.add_dropdown("new robot", tuple(MODELS), initial_value="differential")
         add = gui.add_button("Add robot", icon=viser.Icon.PLUS)
-        add.on_click(lambda _: self._do(self._add_robot))
+        add.on_click(lambda _: self._do(self._add_robot, self.mask_msg))
         rm = gui.add_button("Remove picked robot", icon=viser.Icon.TRASH)
-        rm.on_click(lambda _: self._do(lambda: s.remove_robot(self.selected)))
+        rm.on_click(lambda _: self._do(lambda: s.remove_robot(self.selected), self.mask_msg))
+
+    def _build_files(self) -> None:
+        gui, s = self.server.gui, self.session
         gui.add_markdown("**Scenario file**")
         save = gui.add_button("Save scenario (YAML)", icon=viser.Icon.DOWNLOAD)
         save.on_click(
@@ -134,11 +135,17 @@ class Panel:
             "Load scenario", icon=viser.Icon.UPLOAD, mime_type=".yaml,.yml"
         )
         load.on_upload(
-            lambda _: self._do(
+            lambda _: self._world_do(
                 lambda: s.load_yaml(load.value.content.decode("utf-8", "replace"), load.value.name)
             )
         )
-        self.run_msg = gui.add_markdown("")
+        gui.add_markdown("**Show**")
+        self.beams = gui.add_checkbox("beams", initial_value=True)
+        self.beams.on_update(lambda _: setattr(self.scene, "show_beams", self.beams.value))
+        self.trails = gui.add_checkbox("trails", initial_value=True)
+        self.trails.on_update(lambda _: setattr(self.scene, "show_trails", self.trails.value))
+        self.overlay = gui.add_checkbox("map overlay", initial_value=False)
+        self.overlay.on_update(lambda _: self._toggle_overlay())
 
     def _toggle_overlay(self) -> None:
         self.scene.show_overlay = self.overlay.value
@@ -148,15 +155,16 @@ class Panel:
         x, y = self.session.free_spot(seed=len(self.session.robot_names()))
         self.selected = self.session.add_robot(self.new_model.value, x, y)
 
-    def _do(self, fn: Any) -> None:
+    def _do(self, fn: Any, where: Any = None) -> None:
         """Run an action; show its refusal in the panel instead of a traceback."""
+        where = where or self.run_msg
+        where.content = ""
         try:
             fn()
-            self.run_msg.content = ""
         except ScenarioError as err:
-            self.run_msg.content = _error_md("\n".join(err.problems))
+            where.content = _error_md("\n".join(err.problems))
         except (EditError, MaskError, ValueError) as err:
-            self.run_msg.content = _error_md(str(err))
+            where.content = _error_md(str(err))
 
     def _key(self, name: str) -> None:
         if self.session.keyboard_robot is None:
@@ -279,6 +287,7 @@ class Panel:
     # ------------------------------------------------------------------ world tab
     def _build_world(self) -> None:
         gui, s = self.server.gui, self.session
+        gui.add_markdown("**Maze editor**")
         self.edit = gui.add_checkbox(
             "edit maze",
             initial_value=False,
@@ -316,10 +325,7 @@ class Panel:
                 self._world_do(lambda: self._click_cell(event.ray_origin, event.ray_direction))
 
     def _world_do(self, fn: Any) -> None:
-        try:
-            fn()
-        except (EditError, ValueError) as err:
-            self.world_msg.content = _error_md(str(err))
+        self._do(fn, self.world_msg)
 
     def _click_cell(self, origin: Any, direction: Any) -> None:
         cell = pick_cell(self.session, np.asarray(origin), np.asarray(direction))
@@ -354,6 +360,8 @@ class Panel:
             self._build_mask(s.robot_config(self.selected))
             self._plot_layout = None
             self.keyboard.value = s.keyboard_robot is not None
+        if self.speed.value != s.speed_label:
+            self.speed.value = s.speed_label
         self.status.content = status + (("<br/>" + _error_md(error)) if error else "")
         self._refresh_numbers()
 
@@ -391,25 +399,29 @@ class Panel:
             return
         keep = t >= t[-1] - 10.0
         t, hw, ht = t[keep], hw[keep], ht[keep]
+        # the plots are made once, with a series for each of up to four wheels, and never
+        # removed: a robot with fewer wheels leaves the rest flat and unlabelled
+        colors = ["#d62728", "#1f77b4", "#2ca02c", "#ff7f0e"]
+        hw4 = np.zeros((len(t), 4))
+        hw4[:, : hw.shape[1]] = hw
+        series = (
+            {"label": "t (s)"},
+            *(
+                {"label": f"{wheels[k]} (rad/s)", "stroke": colors[k], "width": 2}
+                if k < len(wheels)
+                else {"label": "-", "stroke": "rgba(0,0,0,0)", "width": 0}
+                for k in range(4)
+            ),
+        )
         key = (self.selected, tuple(wheels))
-        if self._plot_layout != key:
-            self._plot_layout = key
-            colors = ["#d62728", "#1f77b4", "#2ca02c", "#ff7f0e"]
+        if self.plot_wheels is None:
             gui = self.server.gui
-            for p in (self.plot_wheels, self.plot_twist):
-                if p is not None:
-                    p.remove()
-            with self._plots_tab:
+            with self._run_tab:
                 self.plot_wheels = gui.add_uplot(
-                    (t, *hw.T),
-                    (
-                        {"label": "t (s)"},
-                        *(
-                            {"label": f"{n} (rad/s)", "stroke": colors[k % 4], "width": 2}
-                            for k, n in enumerate(wheels)
-                        ),
-                    ),
+                    (t, *hw4.T),
+                    series,
                     title="wheel speeds (rad/s)",
+                    scales={"x": {"time": False}},
                     aspect=1.6,
                 )
                 self.plot_twist = gui.add_uplot(
@@ -421,11 +433,16 @@ class Panel:
                         {"label": "omega (rad/s)", "stroke": "#8e44ad", "width": 2},
                     ),
                     title="body twist",
+                    scales={"x": {"time": False}},
                     aspect=1.6,
                 )
-        else:
-            self.plot_wheels.data = (t, *hw.T)
-            self.plot_twist.data = (t, *ht.T)
+            self._plot_layout = key
+            return
+        if self._plot_layout != key:
+            self._plot_layout = key
+            self.plot_wheels.series = series
+        self.plot_wheels.data = (t, *hw4.T)
+        self.plot_twist.data = (t, *ht.T)
 
 
 def pick_cell(session: Session, origin: np.ndarray, direction: np.ndarray):

@@ -235,7 +235,7 @@ class SceneView:
                 "/beams", pts, colors, thickness=1.0, thickness_units="screen"
             )
             self._hits = sc.add_point_cloud(
-                "/hits", hits, colors=HIT_RGB, point_size=0.06, point_shape="circle"
+                "/hits", hits, colors=HIT_RGB, point_size=0.035, point_shape="circle"
             )
         else:
             self._beams.points = pts

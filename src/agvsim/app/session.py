@@ -63,6 +63,16 @@ class Session:
         self.base_dir = scenario._base_dir
         self.allow_python = allow_python
         self.config: dict[str, Any] = scenario.model_dump(mode="json", exclude_unset=True)
+        # python controllers run only as the command-line scenario names them (file, name)
+        self._trusted_python = (
+            {
+                (r.controller.file, r.controller.name)
+                for r in scenario.robots
+                if r.controller.type == "python"
+            }
+            if allow_python
+            else set()
+        )
         self.lock = threading.RLock()
         self.playing = False
         self.speed_label = "real time"
@@ -81,16 +91,16 @@ class Session:
         sc = parse_scenario(copy.deepcopy(cfg), self.source)
         sc._base_dir = self.base_dir
         sc._source = self.source
-        if not self.allow_python:
-            for r in sc.robots:
-                if r.controller.type == "python":
-                    raise ScenarioError(
-                        self.source,
-                        [
-                            f"robot {r.name!r}: python controllers cannot be loaded from the "
-                            "browser; start the app with that scenario on the command line"
-                        ],
-                    )
+        for r in sc.robots:
+            c = r.controller
+            if c.type == "python" and (c.file, c.name) not in self._trusted_python:
+                raise ScenarioError(
+                    self.source,
+                    [
+                        f"robot {r.name!r}: python controllers cannot come from the browser; "
+                        "only those of the scenario given on the command line run"
+                    ],
+                )
         return sc
 
     def _build(self, cfg: dict[str, Any]) -> Simulation:
@@ -499,10 +509,13 @@ class Session:
         if not isinstance(data, dict):
             raise ScenarioError(source, ["the file must hold a mapping of keys"])
         with self.lock:
-            saved = self.source
-            self.source = source
+            saved, trusted = self.source, self._trusted_python
+            self.source, self._trusted_python = source, set()  # nothing from a browser runs
             try:
                 sim = self._build(data)
+            except ScenarioError:
+                self._trusted_python = trusted
+                raise
             finally:
                 self.source = saved
             self.config, self.sim = data, sim
