@@ -247,7 +247,9 @@ def camera_panoramic(grid: OccupancyGrid) -> CameraPose:
     xmin, xmax, ymin, ymax = grid.extent_m
     cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
     size = max(xmax - xmin, ymax - ymin)
-    return CameraPose((cx - 0.55 * size, cy - 0.75 * size, 0.65 * size), (cx, cy, 0.0))
+    return CameraPose(
+        (cx - 0.45 * size, cy - 0.62 * size, 0.55 * size), (cx + 0.08 * size, cy, 0.0)
+    )
 
 
 def camera_top(grid: OccupancyGrid, fov_rad: float = np.deg2rad(50.0)) -> CameraPose:
