@@ -81,7 +81,14 @@ class SceneView:
         verts, faces = shapes.wall_mesh(grid, min(shapes.WALL_HEIGHT_M, 1.0))
         if len(faces):
             sc.add_mesh_simple(
-                "/walls", verts, faces, color=WALL_RGB, flat_shading=True, side="double"
+                "/walls",
+                verts,
+                faces,
+                color=WALL_RGB,
+                flat_shading=True,
+                side="double",
+                cast_shadow=False,
+                receive_shadow=False,
             )
         else:
             sc.add_frame("/walls", show_axes=False)  # replaces an old mesh
@@ -104,6 +111,8 @@ class SceneView:
                 color=color,
                 dimensions=parts.body_size_m,
                 position=parts.body_center_m,
+                cast_shadow=False,
+                receive_shadow=False,
             )
             # a nose marks the front
             bx, _, bz = parts.body_center_m
@@ -112,6 +121,8 @@ class SceneView:
                 color=(250, 250, 250),
                 dimensions=(0.06, parts.body_size_m[1] * 0.5, 0.02),
                 position=(bx + parts.body_size_m[0] / 2 - 0.05, 0.0, bz + shapes.BODY_HEIGHT_M / 2),
+                cast_shadow=False,
+                receive_shadow=False,
             )
             wheels = []
             for k, wp in enumerate(parts.wheels):
@@ -124,12 +135,16 @@ class SceneView:
                     height=wp.width_m,
                     color=(40, 40, 40),
                     radial_segments=20,
+                    cast_shadow=False,
+                    receive_shadow=False,
                 )
                 # a spoke shows the rotation
                 sc.add_box(
                     f"{root}/w{k}/spoke",
                     color=(235, 200, 40),
                     dimensions=(wp.radius_m * 1.6, wp.radius_m * 0.25, wp.width_m * 1.05),
+                    cast_shadow=False,
+                    receive_shadow=False,
                 )
                 if wp.rollers:
                     for j in range(8):
@@ -144,6 +159,8 @@ class SceneView:
                             dimensions=(wp.radius_m * 0.25, wp.radius_m * 0.18, wp.width_m * 1.2),
                             position=(wp.radius_m * np.cos(a), wp.radius_m * np.sin(a), 0.0),
                             wxyz=q,
+                            cast_shadow=False,
+                            receive_shadow=False,
                         )
                 wheels.append(node)
             label = sc.add_label(
