@@ -67,8 +67,9 @@ def serve(
         where = f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{a.port}"
         out.print(f"agvsim app on [bold]{where}[/bold]  (Ctrl-C stops it)")
         if host not in ("127.0.0.1", "localhost", "::1"):
-            err.print(f"warning: listening on {host}: anyone on your network can open it",
-                      style="yellow")
+            err.print(
+                f"warning: listening on {host}: anyone on your network can open it", style="yellow"
+            )
 
     try:
         serve_app(scenario, host=host, port=port, play=play, on_ready=ready)
@@ -188,6 +189,89 @@ def bench(
         sys.stdout.write(json.dumps(result) + "\n")
     else:
         out.print_json(json.dumps(result))
+
+
+@app.command()
+def slam(
+    target: Annotated[
+        str,
+        typer.Argument(
+            help="A laser log to map (CARMEN .clf / .clf.gz), or 'eval' TRAJECTORY RELATIONS, "
+            "or 'optimize' GRAPH.g2o.",
+            metavar="LOG | eval | optimize",
+        ),
+    ],
+    files: Annotated[list[Path] | None, typer.Argument(help="Files of eval / optimize.")] = None,
+    out_dir: Annotated[
+        Path | None, typer.Option("--out", help="Output folder (mapping) or file (optimize).")
+    ] = None,
+    max_scans: Annotated[
+        int | None, typer.Option(help="Stop after this many scans (a slice of the log).")
+    ] = None,
+    robust: Annotated[str, typer.Option(help="optimize: none, huber or cauchy.")] = "none",
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """2-D graph SLAM: map a laser log (writes trajectory.txt, map.pgm/.yaml/.png to --out),
+    score a trajectory (Kuemmerle et al. relations), or optimise a g2o pose graph."""
+    from agvsim.slam.eval_cli import SlamCommandError, eval_command, optimize_g2o_command
+
+    files = files or []
+    try:
+        if target == "eval":
+            if len(files) != 2:
+                raise SlamCommandError("usage: agvsim slam eval TRAJECTORY RELATIONS")
+            out.print(eval_command(files[0], files[1]), markup=False, highlight=False)
+            return
+        if target == "optimize":
+            if len(files) != 1:
+                raise SlamCommandError("usage: agvsim slam optimize GRAPH.g2o [--out FILE]")
+            text = optimize_g2o_command(files[0], out_dir, robust, 100)
+            out.print(text, markup=False, highlight=False)
+            return
+        if files:
+            raise SlamCommandError(f"mapping takes one log; got extra arguments {files}")
+        _slam_log(Path(target), out_dir or Path("runs/slam"), max_scans, quiet)
+    except SlamCommandError as e:
+        _fail("error", e)
+        raise typer.Exit(2) from None
+
+
+def _slam_log(log: Path, out_dir: Path, max_scans: int | None, quiet: bool) -> None:
+    from agvsim.slam.carmen import CarmenFormatError
+    from agvsim.slam.offline import run_offline
+
+    if not log.is_file():
+        _fail("error", f"{log}: no such log file")
+        raise typer.Exit(2)
+    try:
+        with Progress(
+            TextColumn("[bold]SLAM[/bold] {task.fields[name]}"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total} scans"),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=err,
+            disable=quiet,
+        ) as bar:
+            task = bar.add_task("slam", total=None, name=log.name)
+            result = run_offline(
+                log,
+                out_dir,
+                max_scans=max_scans,
+                progress=lambda done, total: bar.update(task, completed=done, total=total),
+            )
+    except (CarmenFormatError, ValueError) as e:
+        _fail("error", e)
+        raise typer.Exit(2) from None
+    r = result
+    out.print(
+        f"{r.n_scans} scans, {r.n_keyframes} keyframes, {r.n_submaps} submaps, "
+        f"{r.n_loop_closures} loop closures; {r.log_duration_s:.0f} s of data in "
+        f"{r.processing_s:.1f} s ({r.realtime_factor:.1f}x real time)\n"
+        f"wrote {r.trajectory_path}, {r.map_yaml_path} (+ .pgm), {r.map_png_path}",
+        markup=False,
+        highlight=False,
+    )
 
 
 @app.command()

@@ -36,3 +36,21 @@ __all__ = [
     "save_g2o",
     "wrap_angle",
 ]
+
+# front end: log reading, scan matching, submaps, loop closure, the online SLAM, offline runs
+from agvsim.slam.carmen import CarmenFormatError, CarmenLog, ScanRecord, read_carmen  # noqa: E402
+from agvsim.slam.graph_slam import GraphSlam, SlamConfig  # noqa: E402
+from agvsim.slam.mapping import OccupancyMap  # noqa: E402
+from agvsim.slam.offline import OfflineResult, run_offline  # noqa: E402
+
+__all__ += [
+    "CarmenFormatError",
+    "CarmenLog",
+    "GraphSlam",
+    "OccupancyMap",
+    "OfflineResult",
+    "ScanRecord",
+    "SlamConfig",
+    "read_carmen",
+    "run_offline",
+]

@@ -1,0 +1,263 @@
+"""Read CARMEN laser logs (``.clf``, ``.clf.gz``), streaming one line at a time.
+
+One message a line, fields separated by blanks; every message ends with
+``ipc_timestamp ipc_hostname logger_timestamp`` (``ipc_timestamp`` is the scan time the
+Kümmerle relations use). Understood messages:
+
+* ``ODOM x y theta tv rv accel`` -- wheel odometry, robot base pose in the odometry frame.
+* ``FLASER n r_1..r_n x y theta odom_x odom_y odom_theta`` -- front laser: the laser pose and the
+  robot pose, both in the odometry frame. No angles in the message: CARMEN's convention is the
+  first beam at -90 deg (counter-clockwise positive), 1 deg apart for 180/181 beams and 0.5 deg
+  for 360/361 beams (``fov = pi`` otherwise spread evenly). A reading at or above the sensor's
+  maximum is "no return"; the maximum is not in the message, so it is the largest reading of the
+  log (a first pass over the file), unless given.
+* ``ROBOTLASER1 type start_angle fov angular_res max_range accuracy remission_mode n r_1..r_n
+  n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv ...`` -- carries
+  its own geometry: beam ``k`` at ``start_angle + k * angular_res``.
+
+``PARAM``, ``RAWLASER1..4``, ``#`` comments, blank lines and other messages are skipped. The laser
+offset is ``T_robot_laser = T_odom_robot^-1 * T_odom_laser``. A malformed line raises
+:class:`CarmenFormatError` naming the file, line number, message and problem.
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "CarmenFormatError",
+    "CarmenLog",
+    "OdomRecord",
+    "ScanRecord",
+    "carmen_angles",
+    "read_carmen",
+]
+
+_TRAILER = 3  # ipc_timestamp ipc_hostname logger_timestamp
+
+
+class CarmenFormatError(ValueError):
+    """A line of a CARMEN log that cannot be read: ``file:line: MESSAGE: problem``."""
+
+    def __init__(self, path: str, line_no: int, message: str, problem: str) -> None:
+        self.path, self.line_no, self.message, self.problem = path, line_no, message, problem
+        super().__init__(f"{path}:{line_no}: {message}: {problem}")
+
+
+@dataclass(frozen=True)
+class ScanRecord:
+    """One laser scan with the odometry at its time stamp."""
+
+    timestamp_s: float  # ipc_timestamp
+    ranges_m: NDArray[np.float64]  # (n,) inf where there is no return
+    angles_rad: NDArray[np.float64]  # (n,) beam directions in the laser frame
+    max_range_m: float  # the sensor's maximum reading
+    odom_pose: NDArray[np.float64]  # (3,) x, y, theta: robot base pose in the odometry frame
+    laser_offset: NDArray[np.float64]  # (3,) T_robot_laser
+
+
+@dataclass(frozen=True)
+class OdomRecord:
+    """An ``ODOM`` message: robot base pose in the odometry frame and its velocities."""
+
+    timestamp_s: float
+    pose: NDArray[np.float64]  # (3,)
+    tv_mps: float
+    rv_radps: float
+
+
+def carmen_angles(n_beams: int) -> NDArray[np.float64]:
+    """FLASER beam angles (rad): from -pi/2, 1 deg apart for 180/181 beams, 0.5 deg for 360/361,
+    otherwise ``n`` beams spread evenly over pi."""
+    if n_beams in (180, 181):
+        step = math.radians(1.0)
+    elif n_beams in (360, 361):
+        step = math.radians(0.5)
+    else:
+        step = math.pi / max(n_beams - 1, 1)
+    return -0.5 * math.pi + step * np.arange(n_beams, dtype=np.float64)
+
+
+def _open(path: Path) -> IO[str]:
+    if path.suffix == ".gz":
+        return gzip.open(path, "rt", encoding="ascii", errors="replace")
+    return open(path, encoding="ascii", errors="replace")
+
+
+def _relative(robot: NDArray[np.float64], laser: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``robot^-1 * laser`` for single poses."""
+    c, s = math.cos(robot[2]), math.sin(robot[2])
+    dx, dy = laser[0] - robot[0], laser[1] - robot[1]
+    dth = math.remainder(laser[2] - robot[2], 2.0 * math.pi)
+    return np.array([c * dx + s * dy, -s * dx + c * dy, dth])
+
+
+class _Line:
+    """The blank-separated fields of one message, read left to right with clear errors."""
+
+    def __init__(self, parts: list[str], path: str, line_no: int) -> None:
+        self.parts, self.pos, self.path, self.line_no = parts, 1, path, line_no
+
+    def fail(self, problem: str) -> CarmenFormatError:
+        return CarmenFormatError(self.path, self.line_no, self.parts[0], problem)
+
+    def floats(self, count: int, what: str) -> NDArray[np.float64]:
+        chunk = self.parts[self.pos : self.pos + count]
+        if len(chunk) < count:
+            raise self.fail(f"line ends early: expected {count} value(s) for {what}")
+        try:
+            values = np.array(chunk, dtype=np.float64)
+        except ValueError:
+            bad = next(v for v in chunk if not _is_float(v))
+            raise self.fail(f"{what}: {bad!r} is not a number") from None
+        if not np.all(np.isfinite(values)):
+            raise self.fail(f"{what}: values must be finite")
+        self.pos += count
+        return values
+
+    def count(self, what: str) -> int:
+        value = self.floats(1, what)[0]
+        if value != int(value) or value < 0:
+            raise self.fail(f"{what}: {self.parts[self.pos - 1]!r} is not a count")
+        return int(value)
+
+    def timestamp(self) -> float:
+        if len(self.parts) - self.pos < _TRAILER:
+            raise self.fail("line ends early: expected ipc_timestamp ipc_hostname logger_timestamp")
+        self.pos = len(self.parts) - _TRAILER
+        return float(self.floats(1, "ipc_timestamp")[0])
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _survey(path: Path) -> tuple[int, float]:
+    """Number of laser messages and the largest FLASER reading of the log (the sensor's
+    no-return value); lines it cannot read are left for the main pass to report."""
+    count, best = 0, 0.0
+    with _open(path) as f:
+        for line in f:
+            if line.startswith("FLASER"):
+                count += 1
+                parts = line.split()
+                try:
+                    n = int(parts[1])
+                    best = max(best, max(map(float, parts[2 : 2 + n]), default=0.0))
+                except (ValueError, IndexError):
+                    continue
+            elif line.startswith("ROBOTLASER1"):
+                count += 1
+    return count, best
+
+
+def _no_return(ranges: NDArray[np.float64], max_range_m: float) -> NDArray[np.float64]:
+    out = ranges.copy()
+    out[(ranges >= max_range_m) | (ranges <= 0.0)] = np.inf
+    return out
+
+
+def _parse_odom(f: _Line) -> OdomRecord:
+    x, y, th, tv, rv = f.floats(5, "x y theta tv rv")
+    return OdomRecord(f.timestamp(), np.array([x, y, th]), float(tv), float(rv))
+
+
+def _parse_flaser(f: _Line, max_range_m: float) -> ScanRecord:
+    n = f.count("num_readings")
+    ranges = f.floats(n, f"{n} range readings")
+    laser = f.floats(3, "laser pose x y theta")
+    robot = f.floats(3, "odometry pose x y theta")
+    stamp = f.timestamp()
+    return ScanRecord(
+        stamp,
+        _no_return(ranges, max_range_m),
+        carmen_angles(n),
+        max_range_m,
+        robot,
+        _relative(robot, laser),
+    )
+
+
+def _parse_robotlaser(f: _Line) -> ScanRecord:
+    _, start, fov, res, max_range = f.floats(5, "laser_type start_angle fov angular_res max_range")
+    f.floats(2, "accuracy remission_mode")
+    if max_range <= 0 or res == 0:
+        raise f.fail(f"max_range {max_range} and angular_res {res} must be positive")
+    n = f.count("num_readings")
+    ranges = f.floats(n, f"{n} range readings")
+    f.floats(f.count("num_remissions"), "remissions")
+    laser = f.floats(3, "laser pose x y theta")
+    robot = f.floats(3, "robot pose x y theta")
+    stamp = f.timestamp()
+    angles = start + res * np.arange(n, dtype=np.float64)
+    return ScanRecord(
+        stamp,
+        _no_return(ranges, max_range),
+        angles,
+        float(max_range),
+        robot,
+        _relative(robot, laser),
+    )
+
+
+def read_carmen(
+    path: str | Path, max_range_m: float | None = None, with_odom: bool = False
+) -> Iterator[ScanRecord | OdomRecord]:
+    """Yield the scans (and, with ``with_odom``, the ``ODOM`` messages) of a CARMEN log in order.
+
+    ``max_range_m`` is the FLASER no-return value; by default the largest FLASER reading in the
+    log. Raises :class:`CarmenFormatError` on a malformed line, :class:`FileNotFoundError` when
+    the file is missing.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"CARMEN log not found: {p}")
+    flaser_max = max_range_m
+    with _open(p) as fh:
+        for line_no, line in enumerate(fh, start=1):
+            parts = line.split()
+            if not parts or parts[0].startswith("#"):
+                continue
+            kind = parts[0]
+            f = _Line(parts, str(p), line_no)
+            if kind == "FLASER":
+                if flaser_max is None:
+                    flaser_max = _survey(p)[1]
+                yield _parse_flaser(f, flaser_max)
+            elif kind == "ROBOTLASER1":
+                yield _parse_robotlaser(f)
+            elif kind == "ODOM":
+                odom = _parse_odom(f)
+                if with_odom:
+                    yield odom
+
+
+class CarmenLog:
+    """A CARMEN log as a sized iterable of :class:`ScanRecord` (one survey pass at open: the
+    number of scans and the FLASER no-return value)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileNotFoundError(f"CARMEN log not found: {self.path}")
+        self._count, self.flaser_max_range_m = _survey(self.path)
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __iter__(self) -> Iterator[ScanRecord]:
+        for rec in read_carmen(self.path, self.flaser_max_range_m or None):
+            if isinstance(rec, ScanRecord):
+                yield rec

@@ -1,0 +1,291 @@
+"""Online graph SLAM for 2-D laser scans: :class:`GraphSlam`.
+
+Per scan (:meth:`GraphSlam.update`), in the order of the paper (Hess et al. 2016, after Olson
+2009 and Konolige et al. 2010):
+
+1. predict the pose from odometry and match the scan against the active submap (local SLAM,
+   :mod:`.frontend`);
+2. keep it as a keyframe when the robot moved or turned enough (motion filter): a graph node
+   with edges to the submaps it is inserted in and to the previous keyframe;
+3. look for loop closures: finished submaps within the search radius, branch-and-bound matching,
+   verification (:mod:`.loop_closure`);
+4. when a loop closed, optimise the sparse pose graph (Levenberg-Marquardt with a Huber kernel,
+   :mod:`.posegraph`).
+
+The graph's variables are the global poses of keyframes and of submap origins. Every scan keeps
+its local pose and its keyframe, so its global pose after optimisation is
+``g_k = G_kf * (l_kf^-1 * l_k)``; the map is rendered from the optimised keyframes on request
+(:meth:`GraphSlam.occupancy_map`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agvsim.slam import scan_matching as sm
+from agvsim.slam.frontend import MotionFilter, Submap, Tracker, TrackingConfig
+from agvsim.slam.loop_closure import LoopClosure, LoopConfig, LoopDetector
+from agvsim.slam.mapping import OccupancyMap, render_occupancy
+from agvsim.slam.posegraph import PoseGraph, optimize
+from agvsim.slam.se2 import between, compose, inverse
+
+__all__ = ["GraphSlam", "SlamConfig"]
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    """One configuration for every log (metres, radians). ``max_range_m = None`` derives the
+    usable range from the sensor: ``min(sensor max, usable_range_m)``."""
+
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    loop: LoopConfig = field(default_factory=LoopConfig)
+    max_range_m: float | None = None
+    usable_range_m: float = 40.0
+    min_range_m: float = 0.1
+    keyframe_distance_m: float = 0.2
+    keyframe_angle_rad: float = math.radians(5.0)
+    keyframe_time_s: float = 10.0
+    sigma_local_m: float = 0.02  # std of a local-SLAM relative pose (keyframe chain, submaps)
+    sigma_local_rad: float = math.radians(0.5)
+    huber_scale: float = 3.0  # in standard deviations
+    optimize_every: int = 50  # keyframes at least between two optimisations of small closures
+
+
+def _information(sigma_m: float, sigma_rad: float) -> F64:
+    return np.diag([sigma_m**-2, sigma_m**-2, sigma_rad**-2])
+
+
+@dataclass
+class _Keyframe:
+    local: F64  # (3,) local tracking pose
+    points: F64  # (n, 2) matching points, robot frame
+    ends: NDArray[np.float32]  # (m, 2) beam end points for the map, robot frame
+    hits: NDArray[np.bool_]  # (m,) True: a return; False: the ray only clears space
+    ang_step: float  # angular search step for its points (rad)
+    submap: int = -1  # the submap it was matched against (the most complete)
+
+
+class GraphSlam:
+    """Graph SLAM over a stream of scans from one laser mounted at ``laser_offset``
+    (``T_robot_laser``) with beam angles ``angles`` (rad) and maximum reading
+    ``sensor_max_range_m``."""
+
+    def __init__(
+        self,
+        sensor_max_range_m: float,
+        laser_offset: F64 | None = None,
+        config: SlamConfig | None = None,
+    ) -> None:
+        self.cfg = cfg = config or SlamConfig()
+        self.max_range_m = cfg.max_range_m or min(sensor_max_range_m, cfg.usable_range_m)
+        self.laser_offset = np.zeros(3) if laser_offset is None else np.asarray(laser_offset, float)
+        self.tracker = Tracker(cfg.tracking)
+        self.motion = MotionFilter(
+            cfg.keyframe_distance_m, cfg.keyframe_angle_rad, cfg.keyframe_time_s
+        )
+        self.loops = LoopDetector(cfg.loop, cfg.tracking.resolution_m)
+        self.graph = PoseGraph()
+        self.keyframes: list[_Keyframe] = []
+        self.node_var: list[int] = []  # graph variable of each keyframe
+        self.submap_var: list[int] = []  # graph variable of each submap
+        self.scan_times: list[float] = []
+        self.scan_local: list[F64] = []
+        self.scan_keyframe: list[int] = []
+        self.loop_edges: list[LoopClosure] = []
+        self._homes = np.zeros(0, np.int64)  # each keyframe's submap
+        self._path = np.zeros(0)  # distance travelled up to each keyframe (m)
+        self._path_at_loop = 0.0  # ... up to the last accepted loop closure
+        self.n_optimisations = 0
+        self._global_from_local = np.zeros(3)
+        self._unoptimised: list[LoopClosure] = []
+        self._last_optimised_node = 0
+        self._info_local = _information(cfg.sigma_local_m, cfg.sigma_local_rad)
+
+    # ------------------------------------------------------------------ the algorithm
+    def update(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
+        """Process one scan (ranges (n,) m, inf = no return; angles (n,) rad in the laser
+        frame; odom_pose (3,) robot base pose by odometry); returns its global pose (3,)."""
+        points, ends, hits = self.scan_points(ranges, angles)
+        guess = self.tracker.predict(odom_pose)
+        pose, _ = self.tracker.match(points, guess, self.angular_step(points))
+        self.tracker.accept(pose, odom_pose)
+        if self.motion.is_keyframe(pose, timestamp):
+            node = self.add_keyframe(pose, points, ends, hits)
+            for closure in self.find_loop_closures(node):
+                self.add_loop_closure(closure)
+            if self.loop_closed():
+                self.optimise()
+        self.scan_times.append(float(timestamp))
+        self.scan_local.append(pose)
+        self.scan_keyframe.append(len(self.keyframes) - 1)
+        return compose(self._global_from_local, pose)
+
+    # ------------------------------------------------------------------ the stages
+    def scan_points(
+        self, ranges: F64, angles: F64
+    ) -> tuple[F64, NDArray[np.float32], NDArray[np.bool_]]:
+        """Matching points (returns within the usable range, robot frame, thinned to one per
+        cell) and map rays (end points clipped to the usable range, with their hit flags)."""
+        r = np.asarray(ranges, np.float64)
+        a = np.asarray(angles, np.float64)
+        ok = (r >= self.cfg.min_range_m) & np.isfinite(r)  # no return: no information
+        rr, aa = r[ok], a[ok]
+        hit = rr <= self.max_range_m
+        rc = np.minimum(rr, self.max_range_m)
+        lo = self.laser_offset
+        xl, yl = rc * np.cos(aa + lo[2]), rc * np.sin(aa + lo[2])
+        ends = np.column_stack([xl + lo[0], yl + lo[1]])
+        pts = ends[hit]
+        res = self.cfg.tracking.resolution_m
+        cells = np.floor(pts / res).astype(np.int64)
+        _, first = np.unique(cells[:, 0] * 1_000_003 + cells[:, 1], return_index=True)
+        return np.ascontiguousarray(pts[np.sort(first)]), ends.astype(np.float32), hit
+
+    def angular_step(self, points: F64) -> float:
+        """Search step that moves the scan's far points (98th percentile of the ranges, at least
+        3 m) by about one cell (:func:`~.scan_matching.angular_step`): a few far points need
+        not set a fine step for all, Gauss-Newton refines the angle."""
+        r = np.hypot(points[:, 0], points[:, 1])
+        k = int(0.98 * (len(r) - 1))
+        r_ref = float(np.partition(r, k)[k]) if len(r) else self.max_range_m
+        return sm.angular_step(self.cfg.tracking.resolution_m, max(r_ref, 3.0))
+
+    def add_keyframe(
+        self, pose: F64, points: F64, ends: NDArray[np.float32], hits: NDArray[np.bool_]
+    ) -> int:
+        """Graph node for the keyframe, edges to the previous keyframe and its submaps."""
+        node = len(self.keyframes)
+        kf = _Keyframe(pose.copy(), points, ends, hits, self.angular_step(points))
+        self.keyframes.append(kf)
+        var = self.graph.add_node(compose(self._global_from_local, pose))
+        self.node_var.append(var)
+        if node > 0:
+            prev = self.keyframes[node - 1]
+            self.graph.add_edge(
+                self.node_var[node - 1], var, between(prev.local, pose), self._info_local
+            )
+        n_before = len(self.tracker.submaps)
+        sensor_xy = compose(pose, self.laser_offset)[:2]
+        self.tracker.insert(node, pose, sensor_xy, compose(pose, _xy0(ends))[:, :2], hits)
+        for s in self.tracker.submaps[n_before:]:
+            self.submap_var.append(self.graph.add_node(compose(self._global_from_local, s.origin)))
+        owners = [s for s in self.tracker.submaps[-3:] if s.nodes and s.nodes[-1] == node]
+        for s in owners:
+            self.graph.add_edge(
+                self.submap_var[s.index], var, between(s.origin, pose), self._info_local
+            )
+        kf.submap = min(s.index for s in owners)
+        if node >= len(self._homes):
+            self._homes = np.concatenate([self._homes, np.zeros(max(node, 64), np.int64)])
+            self._path = np.concatenate([self._path, np.zeros(max(node, 64))])
+        self._homes[node] = kf.submap
+        if node > 0:
+            step = between(self.keyframes[node - 1].local, pose)
+            self._path[node] = self._path[node - 1] + math.hypot(step[0], step[1])
+        return node
+
+    def find_loop_closures(self, node: int) -> list[LoopClosure]:
+        """Candidates within the search radius, matched and verified."""
+        est = self.graph.poses[np.asarray(self.node_var)]
+        homes = self._homes[: len(self.keyframes)]
+        kf = self.keyframes[node]
+        out: list[LoopClosure] = []
+        path = self._path[: node + 1]
+        since = path[node] - min(path[node], self._path_at_loop)
+        drift = self.cfg.loop.drift_per_m * np.minimum(path[node] - path, since)
+        for s, drift_m in self.loops.candidates(
+            node, est[:, :2], homes, drift, self.tracker.submaps
+        ):
+            g_s = self.graph.poses[self.submap_var[s]]
+            closure = self.loops.match(
+                node,
+                kf.points,
+                kf.ang_step,
+                est[node],
+                kf.local,
+                self.tracker.submaps[s],
+                g_s,
+                drift_m,
+            )
+            if closure is not None:
+                out.extend(self.loops.verify(closure))
+        return out
+
+    def add_loop_closure(self, c: LoopClosure) -> None:
+        """Submap -> node edge with the match as measurement (Huber-robust in optimisation)."""
+        self.graph.add_edge(
+            self.submap_var[c.submap], self.node_var[c.node], c.measurement, c.information
+        )
+        self.loop_edges.append(c)
+        self._path_at_loop = float(self._path[c.node])
+        self._unoptimised.append(c)
+
+    def loop_closed(self) -> bool:
+        """Optimise after a closure that moves the graph, or every ``optimize_every`` keyframes
+        while small closures come in."""
+        if not self._unoptimised:
+            return False
+        big = any(not self.loops.agrees(between(c.estimate, c.matched)) for c in self._unoptimised)
+        return big or len(self.keyframes) - self._last_optimised_node >= self.cfg.optimize_every
+
+    def optimise(self, max_iterations: int = 20) -> None:
+        """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed)."""
+        result = optimize(
+            self.graph,
+            robust="huber",
+            robust_scale=self.cfg.huber_scale,
+            max_iterations=max_iterations,
+            tolerance=1e-6,
+        )
+        self.graph.poses = result.poses
+        last = len(self.keyframes) - 1
+        g_last = self.graph.poses[self.node_var[last]]
+        self._global_from_local = compose(g_last, inverse(self.keyframes[last].local))
+        self._unoptimised = []
+        self._last_optimised_node = len(self.keyframes)
+        self.loops.clear_pending()
+        self.n_optimisations += 1
+
+    # ------------------------------------------------------------------ results
+    def finish(self) -> None:
+        """Final optimisation (call once at the end of a log)."""
+        if self.keyframes:
+            self.optimise(max_iterations=50)
+
+    def trajectory(self) -> tuple[F64, F64]:
+        """``(timestamps (M,), poses (M, 3))``: every scan's global robot pose,
+        ``g_k = G_kf * (l_kf^-1 * l_k)``."""
+        if not self.scan_times:
+            return np.zeros(0), np.zeros((0, 3))
+        local = np.asarray(self.scan_local)
+        kfi = np.asarray(self.scan_keyframe)
+        kf_local = np.asarray([k.local for k in self.keyframes])[kfi]
+        kf_global = self.graph.poses[np.asarray(self.node_var)][kfi]
+        return np.asarray(self.scan_times), compose(kf_global, between(kf_local, local))
+
+    def keyframe_poses(self) -> F64:
+        """Global poses (K, 3) of the keyframes."""
+        return self.graph.poses[np.asarray(self.node_var)].copy()
+
+    def occupancy_map(self, resolution_m: float | None = None) -> OccupancyMap:
+        """Log-odds map rendered from the optimised keyframe poses."""
+        res = resolution_m or self.cfg.tracking.resolution_m
+        poses = self.keyframe_poses()
+        sensors = compose(poses, self.laser_offset)
+        ends = [compose(p, _xy0(k.ends))[:, :2] for p, k in zip(poses, self.keyframes, strict=True)]
+        return render_occupancy(sensors, ends, [k.hits for k in self.keyframes], res)
+
+    @property
+    def submaps(self) -> list[Submap]:
+        return self.tracker.submaps
+
+
+def _xy0(xy: NDArray[np.floating]) -> F64:
+    """Points (n, 2) as poses (n, 3) with theta 0, for :func:`compose`."""
+    return np.column_stack([xy, np.zeros(len(xy))]).astype(np.float64)

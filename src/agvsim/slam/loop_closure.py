@@ -1,0 +1,210 @@
+"""Loop closure: candidates within a search radius, branch-and-bound matching, verification.
+
+For a new keyframe ``i`` with global estimate ``g_i``, every finished submap ``s`` holding a
+keyframe within ``search_radius_m`` of ``g_i`` (and none of the last ``min_node_gap`` keyframes)
+is a candidate. The scan is placed in the submap's frame at the graph's guess
+``x_0 = o_s * (G_s^-1 * g_i)`` (``o_s``: submap origin in the local frame it was built in,
+``G_s``: its global pose) and matched with :func:`~.scan_matching.branch_and_bound` over a
+``+-window_m``, ``+-window_rad`` window, then refined by Gauss-Newton.
+
+A closure is *verified* when
+
+1. its score (mean likelihood of the scan's points in the submap) is at least ``min_score``, and
+2. the matched global pose ``g_i'`` agrees with the graph (``D = g_i^-1 g_i'`` within
+   ``agree_m`` and ``agree_rad``), or a recent pending closure ``j`` is consistent with it: the
+   two matched poses are placed as local tracking placed the two keyframes,
+   ``(g_j'^-1 g_i')^-1 (l_j^-1 l_i)`` within the same bounds (pairwise consistency). A single
+   strong match in a place that merely looks alike cannot bend the graph on its own.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agvsim.slam import scan_matching as sm
+from agvsim.slam.frontend import Submap
+from agvsim.slam.se2 import between, compose
+
+__all__ = ["LoopClosure", "LoopConfig", "LoopDetector"]
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """Knobs of loop closing (metres, radians)."""
+
+    search_radius_m: float = 3.0  # the thesis's search radius
+    window_m: float = 1.5  # branch-and-bound window around the graph's guess, +-
+    window_rad: float = math.radians(15.0)
+    drift_per_m: float = 0.02  # drift bound of local SLAM per metre travelled (m/m)
+    drift_rad_per_m: float = math.radians(5.0)  # extra angular window per metre of drift bound
+    max_drift_m: float = 8.0
+    min_score: float = 0.55  # the thesis's loop-closure threshold, as a mean likelihood
+    min_node_gap: int = 80  # keyframes between a node and the submaps it may close on
+    max_candidates: int = 2  # submaps matched per keyframe, nearest first
+    agree_m: float = 0.3
+    agree_rad: float = math.radians(3.0)
+    pending_nodes: int = 20  # how long an unconfirmed closure waits for a second one
+    sigma_m: float = 0.05  # std of a match along its best-constrained direction
+    min_eigen_ratio: float = 0.02  # floor of the information along weak directions (corridors)
+    pyramid_levels: int = 6
+    gn_iterations: int = 15
+
+
+@dataclass(frozen=True)
+class LoopClosure:
+    """Node ``node`` seen in submap ``submap``: ``measurement`` = T_submap_node (3,)."""
+
+    node: int
+    submap: int
+    measurement: F64
+    score: float
+    matched: F64  # g_i': the node's global pose implied by the match (3,)
+    estimate: F64  # g_i: the graph's global estimate of the node when matched (3,)
+    local: F64  # l_i: the node's local tracking pose (3,)
+    information: F64  # (3, 3) in the submap frame's node coordinates, see _shape_information
+
+
+class LoopDetector:
+    """Finds, matches and verifies loop closures; caches the submaps' max pyramids (LRU)."""
+
+    def __init__(self, cfg: LoopConfig, resolution_m: float) -> None:
+        self.cfg = cfg
+        self.res = resolution_m
+        self._pyramids: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._pending: list[LoopClosure] = []
+
+    def candidates(
+        self,
+        node: int,
+        node_xy: F64,
+        node_submap: NDArray[np.int64],
+        drift_m: F64,
+        submaps: list[Submap],
+    ) -> list[tuple[int, float]]:
+        """Finished submaps with a keyframe ``k`` within ``search_radius_m + drift_m[k]`` of
+        ``node``, nearest first, with that drift bound; ``node_xy (N, 2)`` global positions,
+        ``node_submap (N,)`` each node's submap, ``drift_m (N,)`` how far the graph's estimate
+        of each node relative to ``node`` may be off."""
+        last = node - self.cfg.min_node_gap
+        if last <= 0:
+            return []
+        d = np.hypot(*(node_xy[:last] - node_xy[node]).T)
+        drift = np.minimum(drift_m[:last], self.cfg.max_drift_m)
+        near = np.nonzero(d <= self.cfg.search_radius_m + drift)[0]
+        if near.size == 0:
+            return []
+        out: list[tuple[int, float]] = []
+        for k in near[np.argsort(d[near])]:
+            s = int(node_submap[k])
+            if all(s != o[0] for o in out) and submaps[s].finished and max(submaps[s].nodes) < last:
+                out.append((s, float(drift[k])))
+                if len(out) == self.cfg.max_candidates:
+                    break
+        return out
+
+    def _pyramid(self, s: Submap) -> np.ndarray:
+        pyr = self._pyramids.get(s.index)
+        if pyr is None:
+            pyr = sm.max_pyramid(s.likelihood, self.cfg.pyramid_levels)
+            self._pyramids[s.index] = pyr
+            if len(self._pyramids) > 48:
+                self._pyramids.popitem(last=False)
+        else:
+            self._pyramids.move_to_end(s.index)
+        return pyr
+
+    def match(
+        self,
+        node: int,
+        points: F64,
+        ang_step: float,
+        g_node: F64,
+        l_node: F64,
+        s: Submap,
+        g_submap: F64,
+        drift_m: float = 0.0,
+    ) -> LoopClosure | None:
+        """Branch-and-bound + Gauss-Newton of ``points`` (robot frame) in submap ``s``, the
+        window widened by the drift bound; None when the score stays under ``min_score``."""
+        cfg = self.cfg
+        win_m = cfg.window_m + drift_m
+        win_rad = cfg.window_rad + drift_m * cfg.drift_rad_per_m
+        guess = compose(s.origin, between(g_submap, g_node))
+        pose, score = sm.branch_and_bound(
+            self._pyramid(s),
+            s.ox,
+            s.oy,
+            self.res,
+            points,
+            guess,
+            win_m,
+            win_rad,
+            ang_step,
+            cfg.min_score,
+        )
+        if score < cfg.min_score:
+            return None
+        refined, score2, hess = sm.gauss_newton(
+            s.likelihood, s.ox, s.oy, self.res, points, pose, cfg.gn_iterations, 1e-4
+        )
+        score = sm.score_pose(s.likelihood, s.ox, s.oy, self.res, points, pose)
+        if score2 >= score and np.all(np.abs(refined[:2] - pose[:2]) < 2 * self.res):
+            pose, score = refined, score2
+        meas = between(s.origin, pose)
+        return LoopClosure(
+            node,
+            s.index,
+            meas,
+            float(score),
+            compose(g_submap, meas),
+            g_node,
+            l_node,
+            _shape_information(hess, -pose[2], cfg.sigma_m, cfg.min_eigen_ratio),
+        )
+
+    def verify(self, closure: LoopClosure) -> list[LoopClosure]:
+        """The closures that become accepted now (this one, and a pending one it confirms)."""
+        cfg = self.cfg
+        self._pending = [p for p in self._pending if closure.node - p.node <= cfg.pending_nodes]
+        if self.agrees(between(closure.estimate, closure.matched)):
+            return [closure]
+        for p in self._pending:
+            err = between(between(p.matched, closure.matched), between(p.local, closure.local))
+            if p.node != closure.node and self.agrees(err):
+                self._pending.remove(p)
+                return [p, closure]
+        self._pending.append(closure)
+        return []
+
+    def clear_pending(self) -> None:
+        """Forget unconfirmed closures (their estimates are stale after an optimisation)."""
+        self._pending = []
+
+    def agrees(self, d: F64) -> bool:
+        """``d`` (3,) within ``agree_m`` and ``agree_rad``."""
+        return bool(math.hypot(d[0], d[1]) <= self.cfg.agree_m and abs(d[2]) <= self.cfg.agree_rad)
+
+
+def _shape_information(hess: F64, rot_rad: float, sigma_m: float, floor: float) -> F64:
+    """Information of a match from the Gauss-Newton ``J^T J`` (computed for submap-frame
+    increments): rotated into the node's frame (the edge error's frame), scaled so that the
+    best-constrained translation direction has std ``sigma_m``, eigenvalues floored at
+    ``floor`` times the largest (a corridor constrains little along itself, so the edge pulls
+    little that way)."""
+    c, s = math.cos(rot_rad), math.sin(rot_rad)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    h = rot @ hess @ rot.T  # R(theta)^T H R(theta), theta the heading in the grid frame
+    lam_t = float(np.linalg.eigvalsh(h[:2, :2])[-1])
+    if not lam_t > 0:
+        return np.diag([sigma_m**-2, sigma_m**-2, (sigma_m / 5.0) ** -2])
+    h = h / (lam_t * sigma_m**2)
+    w, v = np.linalg.eigh(h)
+    w = np.maximum(w, floor * w[-1])
+    return (v * w) @ v.T
