@@ -128,7 +128,7 @@ def test_help_lists_every_command():
         [sys.executable, "-m", "agvsim.cli", "--help"], capture_output=True, text=True, timeout=120
     )
     assert res.returncode == 0
-    for cmd in ("run", "serve", "validate", "bench", "models", "statechart"):
+    for cmd in ("run", "serve", "slam", "validate", "bench", "models", "statechart"):
         assert cmd in res.stdout
 
 
