@@ -41,7 +41,13 @@ F64 = NDArray[np.float64]
 @dataclass(frozen=True)
 class SlamConfig:
     """One configuration for every log (metres, radians). ``max_range_m = None`` derives the
-    usable range from the sensor: ``min(sensor max, usable_range_m)``."""
+    usable range from the sensor: ``min(sensor max, usable_range_m)``; the angular search step
+    follows from the scan's ranges (:meth:`GraphSlam.angular_step`).
+
+    The thesis's knobs: map resolution 20 cells/m is ``tracking.resolution_m``; max range 8 m
+    is ``max_range_m`` (its 10 m lidar); the loop-closure threshold is ``loop.min_score`` (a
+    mean likelihood in [0, 1]); the search radius 3 m is ``loop.search_radius_m``, widened by
+    ``loop.drift_per_m`` per metre travelled since the last closure."""
 
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     loop: LoopConfig = field(default_factory=LoopConfig)
