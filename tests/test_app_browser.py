@@ -9,23 +9,15 @@ from __future__ import annotations
 import io
 import os
 import shutil
-import socket
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from agvsim.bench_app import FLAGS, free_port
+
 CHROMIUM = "/usr/bin/chromium"
-FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 ROOM = """\
 name: room
 world:
@@ -64,12 +56,6 @@ def _need_browser() -> None:
         pytest.skip(why)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def app(tmp_path_factory):
     _need_browser()
@@ -77,7 +63,7 @@ def app(tmp_path_factory):
 
     path = tmp_path_factory.mktemp("app") / "room.yaml"
     path.write_text(ROOM)
-    a = App(open_session(path), port=_free_port()).start()
+    a = App(open_session(path), port=free_port()).start()
     yield a
     a.stop()
 

@@ -14,6 +14,8 @@ import time
 import urllib.request
 from pathlib import Path
 
+from agvsim.bench_app import free_port
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -31,17 +33,11 @@ def test_readme_has_exactly_two_commands_and_ci_runs_the_test_one():
     assert tests in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_readme_main_command_serves_the_app_on_localhost():
     main = _commands()[0]
     serve = shlex.split(main.split("&&")[-1])
     assert serve[0].endswith("agvsim") and serve[1] == "serve"
-    port = _free_port()
+    port = free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "agvsim.cli", *serve[1:], "--port", str(port)],
         cwd=ROOT,

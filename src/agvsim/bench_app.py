@@ -63,7 +63,8 @@ def _tiled_c1():
     return tile(thesis_maze("thesis_c1"), 2, 2).occupied
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A free TCP port on 127.0.0.1 (for the app in tests and benchmarks)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -78,7 +79,7 @@ def run_app_benchmark(
     sc = parse_scenario(_scenario())
     session = Session(sc, "app benchmark")
     session.step(1)  # compile the kernels before timing
-    app = App(session, port=_free_port()).start()
+    app = App(session, port=free_port()).start()
     result: dict = {"robots": 10, "lidar_beams": 240, "seconds": seconds}
     pw = None
     try:

@@ -27,7 +27,6 @@ class AppStats:
 
     frames: int = 0
     steps: int = 0
-    started: float = field(default_factory=time.perf_counter)
     frame_times: list[float] = field(default_factory=list)
 
 
