@@ -16,6 +16,7 @@ pursue         ``PursueConfig``      :class:`agvsim.control.pursuit.Pursuer`
 evade          ``EvadeConfig``       :class:`agvsim.control.pursuit.Evader`
 teleop         ``TeleopConfig``      :class:`agvsim.control.teleop.Teleop`
 wall_follow    ``WallFollowConfig``  :class:`agvsim.control.wall_follow.WallFollower`
+marker_search  ``MarkerSearchConfig``  :class:`agvsim.control.marker_search.MarkerSearch`
 =============  ====================  ======================================================
 """
 
@@ -31,8 +32,9 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from agvsim.control.api import ControllerContext
 from agvsim.control.explorer import TremauxExplorer
 from agvsim.control.goal import GoToGoal
+from agvsim.control.marker_search import MarkerSearch
 from agvsim.control.maze_solver import AStarMazeSolver
-from agvsim.control.mobility import PoseSource
+from agvsim.control.mobility import Mobility, PoseSource
 from agvsim.control.pure_pursuit import PurePursuit
 from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
@@ -336,6 +338,58 @@ def build_wall_follow(cfg: WallFollowConfig, ctx: ControllerContext) -> WallFoll
     )
 
 
+# ---------------------------------------------------------------------------------- camera
+class MarkerSearchConfig(BaseModel):
+    """``controller: {type: marker_search, marker_id: 3, stop_distance_m: 0.8}``"""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["marker_search"]
+    marker_id: int = Field(ge=0, description="the ArUco / AprilTag id to find")
+    dictionary: Literal[
+        "4x4_50", "4x4_100", "4x4_250", "4x4_1000", "5x5_50", "5x5_100", "5x5_250", "5x5_1000",
+        "6x6_50", "6x6_100", "6x6_250", "6x6_1000", "7x7_50", "7x7_100", "7x7_250", "7x7_1000",
+        "original", "mip_36h12",
+        "apriltag_16h5", "apriltag_25h9", "apriltag_36h10", "apriltag_36h11",
+    ] = "4x4_50"  # fmt: skip
+    camera: str = Field("camera", description="the name of the robot's camera")
+    stop_distance_m: float = Field(0.8, gt=0, le=20, description="from the marker to the camera")
+    speed_m_s: float = Field(0.4, gt=0, le=10)
+    turn_rate_rad_s: float = Field(0.8, gt=0, le=10)
+    clearance_m: float = Field(0.25, ge=0, le=5, description="kept from obstacles when exploring")
+    leg_m: float = Field(2.5, gt=0, le=100, description="longest straight leg between scans")
+    pose_source: PoseSource = "odometry"
+
+
+def build_marker_search(cfg: MarkerSearchConfig, ctx: ControllerContext) -> MarkerSearch:
+    """The controller for one robot: its camera (by name) and body from its spec."""
+    spec = ctx.spec
+    cams = {c.name: c for c in getattr(spec, "cameras", ())}
+    if cfg.camera not in cams:
+        raise ValueError(
+            f"camera: the robot has no camera {cfg.camera!r} (it has "
+            f"{', '.join(sorted(cams)) or 'none'}; add {{type: camera}} to its sensors)"
+        )
+    if not Mobility.of(spec.model).can_spin:  # type: ignore[attr-defined]
+        raise ValueError(
+            "marker_search turns on the spot: use a model that can (differential, mecanum, "
+            "omni3, or a tricycle with max_steer_rad >= pi/2)"
+        )
+    return MarkerSearch(
+        cams[cfg.camera],
+        cfg.marker_id,
+        dictionary=cfg.dictionary,
+        stop_distance_m=cfg.stop_distance_m,
+        speed_m_s=cfg.speed_m_s,
+        turn_rate_rad_s=cfg.turn_rate_rad_s,
+        body_half_width_m=spec.body_width_m / 2.0,  # type: ignore[attr-defined]
+        body_front_m=spec.body_offset_x_m + spec.body_length_m / 2.0,  # type: ignore[attr-defined]
+        body_height_m=spec.height_m,  # type: ignore[attr-defined]
+        clearance_m=cfg.clearance_m,
+        leg_m=cfg.leg_m,
+        pose_source=cfg.pose_source,
+    )
+
+
 BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
     GoalConfig: build_goal,
     WaypointsConfig: build_waypoints,
@@ -344,4 +398,5 @@ BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
     EvadeConfig: build_evade,
     TeleopConfig: build_teleop,
     WallFollowConfig: build_wall_follow,
+    MarkerSearchConfig: build_marker_search,
 }

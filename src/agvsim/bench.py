@@ -156,4 +156,66 @@ def run_benchmarks(quick: bool = False, log: Callable[[str], object] | None = No
     for n, steps in plan:
         say(f"{n} robot(s), {steps} steps ...")
         out["fleet"][str(n)] = steps_per_second(n, steps)
+    say("camera frames/s (320 x 240, one thread) ...")
+    out["camera"] = camera_benchmark(quick)
+    return out
+
+
+def camera_benchmark(quick: bool = False, seed: int = 0) -> dict:
+    """The onboard camera (issue #6): frames/s of one 320 x 240 camera on ONE thread in the
+    thesis C.1 maze with 4 markers and 4 robots (boxes in view), at random free poses, level and
+    pitched 10 deg; and steps/s of those 4 robots (50 Hz, each with a 10 Hz camera) against the
+    same robots without cameras. The first frame's time (compile or cache load) is apart."""
+    from agvsim.sensors.camera import CameraSpec
+    from agvsim.world.markers import Appearance, Face, MarkerKind, MarkerSpec, place_markers
+
+    grid = thesis_maze("thesis_c1")
+    marks = [
+        MarkerSpec(MarkerKind.ARUCO, Face.WEST, 0.4, 0.5, cell=(r, 19), marker_id=r)
+        for r in (7, 8, 9, 10)
+    ]
+    world = World(grid, appearance=Appearance(markers=place_markers(marks, grid, 1.0)))
+    rng = np.random.default_rng(seed)
+    poses = free_starts(grid, 4, rng)
+    model = DifferentialDrive(wheel_radius_m=0.1, half_track_m=0.25)
+
+    def sim(cams: tuple, pitch: float = 0.0) -> Simulation:
+        specs = tuple(CameraSpec(mount_xy_m=(0.25, 0.0), pitch_rad=pitch) for _ in cams)
+        robots = [
+            RobotSpec(
+                f"r{i}",
+                model,
+                initial_pose=tuple(p),
+                body_length_m=0.5,
+                body_width_m=0.4,
+                cameras=specs,
+            )
+            for i, p in enumerate(poses)
+        ]
+        return Simulation(world, robots, seed=seed)
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    out: dict = {"width_px": 320, "height_px": 240, "threads": 1}
+    try:
+        t0 = time.perf_counter()
+        level = sim((1,))
+        out["first_frame_s"] = round(time.perf_counter() - t0, 3)
+        frames = 300 if quick else 2000
+        free = free_starts(grid, 40, rng)
+        for key, s in (("frames_per_s", level), ("frames_per_s_pitch10", sim((1,), 0.1745))):
+            fp = s.footprints(s.state.poses)
+            s.cameras.render(0, free[0], fp)  # type: ignore[union-attr]
+            t0 = time.perf_counter()
+            for k in range(frames):
+                s.cameras.render(0, free[k % len(free)], fp)  # type: ignore[union-attr]
+            out[key] = round(frames / (time.perf_counter() - t0), 1)
+        steps = 200 if quick else 1000
+        for key, s in (("steps_per_s_4_cameras", level), ("steps_per_s_no_camera", sim(()))):
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                s.step()
+            out[key] = round(steps / (time.perf_counter() - t0), 1)
+    finally:
+        numba.set_num_threads(before)
     return out

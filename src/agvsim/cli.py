@@ -82,6 +82,32 @@ def serve(
 
 
 @app.command()
+def replay(
+    recording: Annotated[Path, typer.Argument(help="A run.mcap written by `agvsim run`.")],
+    host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port of the player.")] = 8080,
+    speed: Annotated[float, typer.Option(help="Playback speed (recorded s per s).")] = 1.0,
+    paused: Annotated[bool, typer.Option("--paused", help="Start paused.")] = False,
+) -> None:
+    """Play a recording (run.mcap) in the browser: play, pause, speed and a time slider."""
+    from agvsim.app.replay import replay as replay_app
+    from agvsim.record.mcap_reader import RecordingError
+
+    def ready(a) -> None:
+        where = f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{a.port}"
+        out.print(f"agvsim replay of {recording} on [bold]{where}[/bold]  (Ctrl-C stops it)")
+
+    try:
+        replay_app(recording, host=host, port=port, speed=speed, play=not paused, on_ready=ready)
+    except (RecordingError, ValueError) as e:
+        _fail("error", e)
+        raise typer.Exit(2) from None
+    except OSError as e:
+        _fail("error", f"cannot listen on {host}:{port}: {e}")
+        raise typer.Exit(1) from None
+
+
+@app.command()
 def run(
     scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
     duration: Annotated[
@@ -92,14 +118,21 @@ def run(
     record_every: Annotated[int, typer.Option(help="Write a trajectory row every N steps.")] = 1,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="Skip plot.png.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    no_mcap: Annotated[
+        bool, typer.Option("--no-mcap", help="Skip run.mcap (the ROS 2 recording).")
+    ] = False,
+    video: Annotated[
+        bool, typer.Option("--video", help="Also write top.mp4 (and one MP4 per camera).")
+    ] = False,
 ) -> None:
-    """Run a scenario headless; write summary.json, trajectory.csv and plot.png to --out."""
+    """Run a scenario headless; write summary.json, trajectory.csv, plot.png and run.mcap
+    (ROS 2 recording, see docs/recording.md) to --out."""
     from agvsim.runner import run_scenario
     from agvsim.scenario import ScenarioError
     from agvsim.sim.engine import ControllerError
 
     progress = Progress(
-        TextColumn("[bold]simulating"),
+        TextColumn("[bold]simulating" + (" + video" if video else "")),
         BarColumn(),
         TextColumn("{task.fields[t]}"),
         TimeElapsedColumn(),
@@ -116,7 +149,17 @@ def run(
 
     try:
         with progress:
-            data = run_scenario(scenario, out_dir, duration, seed, record_every, not no_plot, tick)
+            data = run_scenario(
+                scenario,
+                out_dir,
+                duration,
+                seed,
+                record_every,
+                not no_plot,
+                tick,
+                record_mcap=not no_mcap,
+                video=video,
+            )
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None
@@ -147,7 +190,10 @@ def run(
     if r["status"] != "completed":
         out.print(f"  status: {r['status']}")
     out.print(
-        f"outputs: {out_dir}/summary.json, trajectory.csv" + ("" if no_plot else ", plot.png")
+        f"outputs: {out_dir}/summary.json, trajectory.csv"
+        + ("" if no_plot else ", plot.png")
+        + ("" if no_mcap else ", run.mcap")
+        + (", top.mp4" if video else "")
     )
 
 
@@ -162,6 +208,57 @@ def validate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file."
         _fail("error", e)
         raise typer.Exit(2) from None
     out.print(f"{scenario}: valid")
+
+
+@app.command()
+def sweep(
+    sweep_file: Annotated[Path, typer.Argument(help="Sweep YAML file.", metavar="SWEEP.yaml")],
+    out_dir: Annotated[
+        Path | None, typer.Option("--out", help="Output folder (default: the file's out:).")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Local processes, or Ray CPUs (default: one per CPU).")
+    ] = None,
+    ray: Annotated[
+        bool, typer.Option("--ray", help="Run on Ray (pip install 'agvsim\\[ray]'), started here.")
+    ] = False,
+    ray_address: Annotated[
+        str | None,
+        typer.Option(help="Run on the Ray cluster at ADDRESS (auto, ray://host:10001); --ray."),
+    ] = None,
+    limit: Annotated[int | None, typer.Option(help="Run at most N new runs, then stop.")] = None,
+    no_plot: Annotated[bool, typer.Option("--no-plot", help="Skip the plots.")] = False,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Check, list; run nothing.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Run a grid of scenario variations x seeds (resumable); write results.parquet/.csv and
+    comparison plots."""
+    from agvsim.experiments.commands import sweep_command
+
+    code = sweep_command(
+        sweep_file, out_dir, workers, ray, ray_address, limit, not no_plot, quiet, dry_run, out, err
+    )
+    raise typer.Exit(code)
+
+
+@app.command()
+def grade(
+    controllers: Annotated[
+        list[Path], typer.Argument(help="Student controller file(s).", metavar="CONTROLLER.py...")
+    ],
+    suite: Annotated[Path, typer.Option("--suite", help="Grading suite YAML file.")],
+    out_dir: Annotated[
+        Path | None, typer.Option("--out", help="Output folder (default: runs/grades/SUITE).")
+    ] = None,
+    name: Annotated[
+        str | None, typer.Option(help="Function or class to grade (default: the suite's).")
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Grade controllers on a suite of tasks; print a score table, write grades.csv/json."""
+    from agvsim.experiments.commands import grade_command
+
+    raise typer.Exit(grade_command(controllers, suite, out_dir, name, quiet, out, err))
 
 
 @app.command()

@@ -25,10 +25,13 @@ def run_scenario(
     record_every: int = 1,
     plot: bool = True,
     progress: Callable[[float, float], None] | None = None,
+    record_mcap: bool = True,
+    video: bool = False,
 ) -> dict:
     """Run to the end and write outputs; returns the summary dict. Raises ScenarioError for a
     bad scenario (before anything runs); after a ControllerError or KeyboardInterrupt the
-    outputs are written and the exception re-raised."""
+    outputs are written and the exception re-raised. ``record_mcap`` streams ``run.mcap``
+    (ROS 2 layouts, docs/recording.md); ``video`` writes ``top.mp4`` and camera videos."""
     if isinstance(scenario, Scenario):
         sc, source = scenario, "scenario"
     else:
@@ -45,16 +48,24 @@ def run_scenario(
         raise ScenarioError(source, [f"duration must be > 0 s, got {total}"])
     n_steps = int(round(total / sim.dt_s))
     metrics = _metrics(sc, sim, source)
+    slams = _slams(sc, sim, source)
     writer = TrajectoryWriter(out / "trajectory.csv", sim, record_every)
+    observers = _observers(sc, sim, out, record_mcap, video, slams)  # run.mcap, videos
     trail: dict[str, list] = {r.name: [] for r in sim.robots}
     trail_every = max(1, n_steps // 4000)
     status, error = "completed", None
     t0 = time.perf_counter()
     writer.record()
+    for s in slams:
+        s.update()
     try:
         for k in range(n_steps):
             sim.step()
             writer.record()
+            for o in observers:
+                o.record()
+            for s in slams:
+                s.update()
             # a list, not a generator: every metric sees every step
             if any([m.update(sim) for m in metrics.values()]):
                 status = "ended_by_metric"
@@ -75,6 +86,8 @@ def run_scenario(
     finally:
         wall = time.perf_counter() - t0
         writer.close()
+        for o in observers:
+            o.close()
         data = summary(
             sim,
             wall,
@@ -88,6 +101,8 @@ def run_scenario(
             },
         )
         data["metrics"] = {name: m.result() for name, m in metrics.items()}
+        if slams:
+            data["slam"] = {s.name: s.write(out) for s in slams}
         write_summary(out / "summary.json", data)
         if plot:
             _plot(sim, trail, out / "plot.png", sc.name)
@@ -112,6 +127,36 @@ def _metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
     except ValueError as err:
         raise ScenarioError(source, [str(err)]) from None
     return out
+
+
+def _observers(
+    sc: Scenario, sim: Simulation, out: Path, mcap: bool, video: bool, slams: list
+) -> list:
+    """The run's recorders (``record()`` after each step, ``close()`` at the end, in order:
+    the final SLAM maps go into run.mcap before it closes)."""
+    found: list = []
+    if mcap:
+        from agvsim.record.mcap_writer import Recorder, SlamMaps, scenario_yaml
+
+        rec = Recorder(out / "run.mcap", sim, scenario_yaml(sc, sim.seed))
+        found += [SlamMaps(rec, slams), rec] if slams else [rec]
+    if video:
+        from agvsim.viz.video import VideoRecorder
+
+        found.append(VideoRecorder(sim, out))
+    return found
+
+
+def _slams(sc: Scenario, sim: Simulation, source: str) -> list:
+    """Online SLAM for the robots with a ``slam:`` block (agvsim.online_slam)."""
+    if not any(r.slam is not None for r in sc.robots):
+        return []
+    from agvsim.online_slam import build_online_slams
+
+    try:
+        return build_online_slams(sc, sim)
+    except ValueError as err:
+        raise ScenarioError(source, [str(err)]) from None
 
 
 def _plot(sim: Simulation, trail: dict[str, list], path: Path, title: str) -> None:

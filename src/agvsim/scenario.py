@@ -25,6 +25,7 @@ from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.scenario_schema import (
     AvoidConfig,
+    CameraConfig,
     LidarConfig,
     PythonControllerConfig,
     RangersConfig,
@@ -36,11 +37,20 @@ from agvsim.scenario_schema import (
     _format_errors,
 )
 from agvsim.scenario_schema import _models_in as _models_in  # re-exported
+from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
-from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
+from agvsim.sim.spec import (
+    BODY_HEIGHT_M,
+    WALL_HEIGHT_M,
+    ControlMode,
+    OdometrySpec,
+    RobotSpec,
+    World,
+)
 from agvsim.world import loaders, mazes
 from agvsim.world.grid import OccupancyGrid
+from agvsim.world.markers import Appearance, Face, MarkerKind, MarkerSpec, Paint, place_markers
 
 
 class ScenarioError(ValueError):
@@ -172,6 +182,72 @@ def _sensor(
     return spec
 
 
+def _camera(sc: CameraConfig, rc: RobotConfig, model: Any, offset: float) -> CameraSpec:
+    """A camera spec; by default on the front of the body, 5 cm above its top."""
+    wheel_r = float(np.asarray(getattr(model, "wheel_radius_m", 0.1)).reshape(-1)[0])
+    mount_z = sc.mount_z_m if sc.mount_z_m is not None else wheel_r + BODY_HEIGHT_M + 0.05
+    if not mount_z < WALL_HEIGHT_M:
+        raise ValueError(
+            f"mount_z_m: the camera at {mount_z:g} m must be below the wall tops "
+            f"({WALL_HEIGHT_M:g} m)"
+        )
+    return CameraSpec(
+        name=sc.name or "camera",
+        width_px=sc.width_px,
+        height_px=sc.height_px,
+        hfov_rad=float(np.deg2rad(sc.hfov_deg)),
+        rate_hz=sc.rate_hz,
+        mount_xy_m=(
+            offset + rc.body.length_m / 2.0 if sc.mount_x_m is None else sc.mount_x_m,
+            sc.mount_y_m,
+        ),
+        mount_z_m=round(float(mount_z), 9),
+        mount_yaw_rad=float(np.deg2rad(sc.mount_yaw_deg)),
+        pitch_rad=float(np.deg2rad(sc.pitch_deg)),
+        range_max_m=sc.range_max_m,
+    )
+
+
+def build_appearance(cfg: WorldConfig, grid: OccupancyGrid) -> Appearance:
+    """Colours and markers of the world (marker textures are made here, with OpenCV)."""
+    col = cfg.colors
+    for k, p in enumerate(col.paint):
+        for key, (a, b), n in (("rows", p.rows, grid.rows), ("cols", p.cols, grid.cols)):
+            if not (0 <= a < n and 0 <= b < n):
+                raise ValueError(
+                    f"colors.paint[{k}].{key}: {[a, b]} is outside the map (allowed: 0..{n - 1})"
+                )
+    specs = []
+    for m in cfg.markers:
+        kind = MarkerKind(m.kind)
+        specs.append(
+            MarkerSpec(
+                kind=kind,
+                face=Face(m.face),
+                size_m=m.size_m,
+                center_z_m=WALL_HEIGHT_M / 2 if m.center_z_m is None else m.center_z_m,
+                cell=None if m.cell is None else (int(m.cell[0]), int(m.cell[1])),
+                xy_m=None if m.x_m is None else (float(m.x_m), float(m.y_m)),  # type: ignore[arg-type]
+                offset_m=m.offset_m,
+                marker_id=int(getattr(m, "id", 0)),
+                dictionary=str(getattr(m, "dictionary", getattr(m, "family", "4x4_50"))),
+                text=str(getattr(m, "text", "")),
+                rgb=tuple(getattr(m, "rgb", (255, 0, 0))),  # type: ignore[arg-type]
+                name=m.name or "",
+            )
+        )
+    return Appearance(
+        wall_rgb=col.wall_rgb,
+        floor_rgb=col.floor_rgb,
+        sky_rgb=col.sky_rgb,
+        box_rgb=col.box_rgb,
+        shade_faces=col.shade_faces,
+        floor_checker=col.floor_checker,
+        paint=tuple(Paint(p.rows, p.cols, p.rgb) for p in col.paint),
+        markers=place_markers(specs, grid, WALL_HEIGHT_M),
+    )
+
+
 def robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
     try:
         return _robot_spec(rc, where, dt_s)
@@ -187,13 +263,16 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
     offset = rc.body.offset_x_m
     if offset is None:
         offset = float(getattr(model, "wheelbase_m", 0.0)) / 2.0
-    sensors = []
+    sensors, cameras = [], []
     for k, sc in enumerate(rc.sensors):
         try:
-            sensors.append(_sensor(sc, offset, 10.0 if sc.type == "lidar" else 1.0 / dt_s))
+            if isinstance(sc, CameraConfig):
+                cameras.append(_camera(sc, rc, model, offset))
+            else:
+                sensors.append(_sensor(sc, offset, 10.0 if sc.type == "lidar" else 1.0 / dt_s))
         except ValueError as err:
             raise ScenarioError("", [f"{where}.sensors[{k}]: {err}"]) from None
-    names = [s.name for s in sensors]
+    names = [s.name for s in sensors] + [c.name for c in cameras]
     if len(set(names)) != len(names):
         raise ScenarioError(
             "", [f"{where}.sensors: names must be unique (set 'name'), got {names}"]
@@ -208,6 +287,7 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
         body_offset_x_m=offset,
         initial_pose=(rc.pose.x_m, rc.pose.y_m, float(wrap_angle(th))),
         sensors=tuple(sensors),
+        cameras=tuple(cameras),
         odometry=OdometrySpec(
             rc.odometry.wheel_noise_rel,
             rc.odometry.wheel_noise_abs_rad_s,
@@ -395,7 +475,11 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
         dtype=np.float64,
     ).reshape(-1, 5)
     specs = [robot_spec(rc, f"robots[{i}] ({rc.name})", sc.dt_s) for i, rc in enumerate(sc.robots)]
-    world = World(grid, boxes)
+    try:
+        look = build_appearance(sc.world, grid)
+    except ValueError as err:
+        raise ScenarioError("", [f"world.{err}"]) from None
+    world = World(grid, boxes, look)
     bindings = _bindings(sc, specs, base, grid)
     sim = Simulation(
         world,

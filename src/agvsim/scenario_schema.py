@@ -42,6 +42,81 @@ class BoxObstacle(_Strict):
     width_m: float = Field(gt=0)
 
 
+Byte = Annotated[int, Field(ge=0, le=255)]
+RGBConfig = tuple[Byte, Byte, Byte]
+
+
+class PaintConfig(_Strict):
+    rows: tuple[int, int] = Field(description="first and last row (inclusive), row 0 = north")
+    cols: tuple[int, int] = Field(description="first and last column (inclusive)")
+    rgb: RGBConfig
+
+
+class ColorsConfig(_Strict):
+    """What the onboard camera sees: colours 0..255 and painted wall cells."""
+
+    wall_rgb: RGBConfig = (175, 175, 185)
+    floor_rgb: RGBConfig = (225, 225, 215)
+    sky_rgb: RGBConfig = (200, 220, 240)
+    box_rgb: RGBConfig = (170, 125, 80)
+    shade_faces: bool = True
+    floor_checker: bool = True
+    paint: list[PaintConfig] = []
+
+
+class _MarkerCommon(_Strict):
+    face: Literal["north", "east", "south", "west"]
+    cell: tuple[int, int] | None = Field(None, description="[row, col] of the wall cell")
+    x_m: float | None = None
+    y_m: float | None = None
+    offset_m: float = Field(0.0, description="along the face, to the right seen from the front")
+    size_m: float = Field(0.4, gt=0, le=100, description="side of the code, quiet zone excluded")
+    center_z_m: float | None = Field(
+        None, ge=0, description="height of the centre; default: half the wall"
+    )
+    name: str | None = Field(None, min_length=1)
+
+    @model_validator(mode="after")
+    def _one_place(self) -> _MarkerCommon:
+        if (self.x_m is None) != (self.y_m is None):
+            raise ValueError("give both x_m and y_m, or cell")
+        if (self.cell is None) == (self.x_m is None):
+            raise ValueError("give exactly one place: cell [row, col] or x_m + y_m")
+        return self
+
+
+class ArucoMarkerConfig(_MarkerCommon):
+    kind: Literal["aruco"]
+    id: int = Field(ge=0)
+    dictionary: Literal[
+        "4x4_50", "4x4_100", "4x4_250", "4x4_1000", "5x5_50", "5x5_100", "5x5_250", "5x5_1000",
+        "6x6_50", "6x6_100", "6x6_250", "6x6_1000", "7x7_50", "7x7_100", "7x7_250", "7x7_1000",
+        "original", "mip_36h12",
+    ] = "4x4_50"  # fmt: skip
+
+
+class AprilTagMarkerConfig(_MarkerCommon):
+    kind: Literal["apriltag"]
+    id: int = Field(ge=0)
+    family: Literal["16h5", "25h9", "36h10", "36h11"] = "36h11"
+
+
+class QrMarkerConfig(_MarkerCommon):
+    kind: Literal["qr"]
+    text: str = Field(min_length=1, max_length=500)
+
+
+class PatchMarkerConfig(_MarkerCommon):
+    kind: Literal["patch"]
+    rgb: RGBConfig
+
+
+MarkerConfig = Annotated[
+    ArucoMarkerConfig | AprilTagMarkerConfig | QrMarkerConfig | PatchMarkerConfig,
+    Field(discriminator="kind"),
+]
+
+
 class WorldConfig(_Strict):
     maze: Literal["thesis_fig16", "thesis_c1"] | None = None
     matrix: list[list[int]] | None = None
@@ -51,6 +126,8 @@ class WorldConfig(_Strict):
     cell_size_m: float = Field(1.0, gt=0, le=100)
     origin_xy_m: tuple[float, float] | None = None
     boxes: list[BoxObstacle] = []
+    colors: ColorsConfig = ColorsConfig()
+    markers: list[MarkerConfig] = []
 
     @model_validator(mode="after")
     def _one_source(self) -> WorldConfig:
@@ -100,7 +177,24 @@ class LidarConfig(SensorCommon):
     range_max_m: float = Field(10.0, gt=0, le=1000)
 
 
-SensorConfig = Annotated[RangersConfig | LidarConfig, Field(discriminator="type")]
+class CameraConfig(_Strict):
+    """The onboard camera: RGB and depth images (agvsim.sensors.camera)."""
+
+    type: Literal["camera"]
+    name: str | None = None
+    width_px: int = Field(320, ge=8, le=4096)
+    height_px: int = Field(240, ge=8, le=4096)
+    hfov_deg: float = Field(60.0, gt=0, lt=170)
+    rate_hz: float = Field(10.0, gt=0, le=1000)
+    range_max_m: float = Field(30.0, gt=0, le=1000)
+    mount_x_m: float | None = Field(None, description="default: the front of the body")
+    mount_y_m: float = 0.0
+    mount_z_m: float | None = Field(None, gt=0, description="default: 5 cm above the body")
+    mount_yaw_deg: float = 0.0
+    pitch_deg: float = Field(0.0, ge=-80, le=80, description="positive: looking down")
+
+
+SensorConfig = Annotated[RangersConfig | LidarConfig | CameraConfig, Field(discriminator="type")]
 
 
 class OdometryConfig(_Strict):
@@ -166,6 +260,23 @@ class MetricsConfig(_Strict):
     coverage: CoverageConfig | None = None
 
 
+class SlamBlock(_Strict):
+    """Online graph SLAM on one of the robot's lidars and its wheel odometry (agvsim.slam)."""
+
+    sensor: str = Field("lidar", description="the lidar (range fan) whose scans SLAM reads")
+    resolution_m: float = Field(0.05, gt=0.005, le=1.0, description="map cell size (20 cells/m)")
+    max_range_m: float | None = Field(
+        None, gt=0, description="readings used up to this range; default: the sensor's maximum"
+    )
+    loop_min_score: float = Field(
+        0.55, gt=0, lt=1, description="loop-closure acceptance threshold (mean match likelihood)"
+    )
+    loop_search_radius_m: float = Field(3.0, gt=0, le=1000, description="loop-closure radius")
+    map_period_s: float = Field(
+        1.0, gt=0, description="how often the live map is redrawn (browser app overlay)"
+    )
+
+
 class RobotConfig(_Strict):
     name: str = Field(min_length=1)
     model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
@@ -180,6 +291,7 @@ class RobotConfig(_Strict):
     knows: list[str] = Field(
         [], description="robots whose true pose this robot's controller sees (obs.others)"
     )
+    slam: SlamBlock | None = None
 
 
 class Scenario(_Strict):
@@ -238,7 +350,7 @@ def _models_in(ann: Any) -> list[type[BaseModel]]:
 
 
 def _tag_of(model: type[BaseModel]) -> str | None:
-    f = model.model_fields.get("type")
+    f = model.model_fields.get("type") or model.model_fields.get("kind")
     args = getattr(f.annotation, "__args__", ()) if f is not None else ()
     return str(args[0]) if args else None
 

@@ -142,7 +142,11 @@ def test_wrong_candidate_is_rejected_right_one_accepted() -> None:
     pts, _, _ = slam.scan_points(cast(truth), ANGLES)
     step = slam.angular_step(pts)
     guess = truth + np.array([0.4, -0.3, math.radians(6.0)])
-    good = det.match(100, pts, step, guess, guess, sub, g_sub)
+    # a 0.5 m correction is more than local SLAM drifts without a drift bound: refused (in a
+    # maze the same walls fit one corridor off) ...
+    assert det.match(100, pts, step, guess, guess, sub, g_sub) is None
+    # ... and accepted when the path since the last closure allows it (0.3 + 2 x 0.5 m)
+    good = det.match(100, pts, step, guess, guess, sub, g_sub, drift_m=0.5)
     assert good is not None and good.score > 0.8
     assert np.allclose(good.matched[:2], truth[:2], atol=0.04)  # within a cell
     assert abs(good.matched[2] - truth[2]) < math.radians(0.5)

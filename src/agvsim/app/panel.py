@@ -5,6 +5,7 @@ run as code (scenario and map files are parsed as data, python controllers are r
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,7 @@ class Panel:
     def __init__(self, server: viser.ViserServer, session: Session, scene: Any):
         self.server, self.session, self.scene = server, session, scene
         self.selected = session.robot_names()[0]
+        self._overlay_due = 0.0
         self.view_of: dict[int, str] = {}  # client id -> view
         self._mask_widgets: dict[str, Any] = {}
         self._mask_folder: Any = None
@@ -57,6 +59,9 @@ class Panel:
         with self._run_tab:
             self._build_run()
             self.numbers = gui.add_markdown("")
+            self.camera_view: Any = None  # the picked robot's camera (thesis Fig. 33)
+            self._camera_key: tuple = ()
+            self._camera_label = ""
             self.plot_wheels: Any = None
             self.plot_twist: Any = None
         with self._robot_tab:
@@ -149,7 +154,8 @@ class Panel:
 
     def _toggle_overlay(self) -> None:
         self.scene.show_overlay = self.overlay.value
-        self.scene._draw_overlay()
+        self._overlay_due = 0.0
+        self.scene.set_overlay(None)  # the world's grid until a SLAM map comes
 
     def _add_robot(self) -> None:
         x, y = self.session.free_spot(seed=len(self.session.robot_names()))
@@ -339,6 +345,19 @@ class Panel:
     def refresh(self) -> None:
         with self._gui_lock:
             self._refresh_locked()
+        self._refresh_overlay()
+
+    def _refresh_overlay(self) -> None:
+        """With "map overlay" on: the picked robot's live SLAM map once a second (the world's
+        grid when it runs no SLAM)."""
+        now = time.perf_counter()
+        if not self.overlay.value or now < self._overlay_due:
+            return
+        self._overlay_due = now + 1.0
+        live = self.session.slam_map(self.selected)
+        if live is None and self.scene.overlay is None:
+            return
+        self.scene.set_overlay(*(live or (None,)))
 
     def _refresh_locked(self) -> None:
         s = self.session
@@ -364,6 +383,51 @@ class Panel:
             self.speed.value = s.speed_label
         self.status.content = status + (("<br/>" + _error_md(error)) if error else "")
         self._refresh_numbers()
+        self._refresh_camera()
+
+    def _refresh_camera(self) -> None:
+        """The sensor camera view: the picked robot's latest camera frame under its numbers
+        (refreshed with them, a few times a second); none when it has no camera."""
+        s = self.session
+        with s.lock:
+            sim = s.sim
+            frame = None
+            try:
+                i = sim.robot_index(self.selected)
+            except (KeyError, ValueError):
+                i = -1
+            if i >= 0 and sim.cameras is not None and sim.cameras.slots_of[i]:
+                c = sim.cameras.slots_of[i][0]
+                key = (id(sim), self.selected, int(sim.state.image_seq[c]))
+                frame = (sim.state.images[c], sim.cameras.specs[c].name, key)
+        with self._gui_lock:
+            if frame is None:
+                if self.camera_view is not None:
+                    self.camera_view.remove()
+                    self.camera_view, self._camera_key = None, ()
+                return
+            img, name, key = frame
+            if key == self._camera_key:
+                return
+            step = max(1, int(np.ceil(img.shape[1] / 320)))  # at most 320 px wide in the panel
+            img = np.ascontiguousarray(img[::step, ::step])
+            label = f"sensor camera ({self.selected}: {name})"
+            if self.camera_view is not None and label != self._camera_label:
+                self.camera_view.remove()
+                self.camera_view = None
+            if self.camera_view is None:
+                with self._run_tab:
+                    self.camera_view = self.server.gui.add_image(
+                        img,
+                        label=label,
+                        format="jpeg",
+                        jpeg_quality=85,
+                        order=self.numbers.order + 0.01,
+                    )
+                self._camera_label = label
+            else:
+                self.camera_view.image = img
+            self._camera_key = key
 
     def _refresh_numbers(self) -> None:
         with self._gui_lock:

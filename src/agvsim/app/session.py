@@ -84,6 +84,8 @@ class Session:
         self._key_twist = np.zeros(3)
         self._budget_s = 0.0
         self.sim: Simulation = self._build(self.config)
+        self._slams: dict[str, Any] = {}
+        self._slam_sim: Simulation | None = None
         self._reset_history()
 
     # ------------------------------------------------------------------ building
@@ -180,8 +182,38 @@ class Session:
         except ControllerError as err:
             self.playing, self.error = False, str(err)
             return False
+        self._slam_update()
         self._sample()
         return True
+
+    # ------------------------------------------------------------------ online SLAM
+    def _slam_update(self) -> None:
+        """Feed the robots' ``slam:`` blocks (rebuilt whenever the simulation is rebuilt)."""
+        if self._slam_sim is not self.sim:
+            self._slam_sim, self._slams = self.sim, {}
+            if any(r.get("slam") for r in self.config.get("robots", [])):
+                from agvsim.online_slam import build_online_slams
+
+                try:
+                    slams = build_online_slams(self._scenario(self.config), self.sim)
+                except (ValueError, ScenarioError) as err:
+                    self.error = f"slam: {err}"
+                    return
+                self._slams = {o.name: o for o in slams}
+        for o in self._slams.values():
+            o.update()
+
+    def slam_map(self, name: str) -> tuple[np.ndarray, float, tuple[float, float]] | None:
+        """The live SLAM map of robot ``name`` as ``(0 occupied .. 1 free, row 0 north; unknown
+        0.5), resolution, lower-left corner)``, or None when it runs no SLAM (yet)."""
+        with self.lock:
+            o = self._slams.get(name) if self._slam_sim is self.sim else None
+            grid = None if o is None else o.live_map()
+        if grid is None:
+            return None
+        free = 1.0 - grid.probability[::-1]
+        free[grid.logodds[::-1] == 0] = 0.5
+        return free, grid.resolution_m, grid.origin_xy_m
 
     def advance(self, wall_dt_s: float, max_work_s: float = 0.03) -> int:
         """Called by the stepping thread: run the steps due after ``wall_dt_s`` of wall time at

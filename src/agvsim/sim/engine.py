@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from dataclasses import replace as dc_replace
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from agvsim.control.api import (
 from agvsim.geometry import box_tables
 from agvsim.kinematics import actuation
 from agvsim.kinematics.base import _integrate_rows, stack_models
+from agvsim.sensors.camera_rig import CameraFrame, CameraRig
 from agvsim.sensors.range_sensor import apply_noise
 from agvsim.sensors.raycast import RayCaster
 from agvsim.sim import observe
@@ -117,6 +119,9 @@ class Simulation:
         self.caster = RayCaster(world.grid)
         self.collider = Collider(world.grid)
         self.sensors = SensorTable.build(self.robots)
+        # cameras only where robots have them: runs without cameras pay nothing
+        has_cam = any(r.cameras for r in self.robots)
+        self.cameras: CameraRig | None = CameraRig(self.robots, world) if has_cam else None
         self._groups = self._build_groups()
         hl_hw = np.array([r.footprint_half_m for r in self.robots], dtype=np.float64)
         self._half = hl_hw  # (N, 2)
@@ -179,6 +184,8 @@ class Simulation:
         n = self.n
         poses = np.array([r.initial_pose for r in self.robots], dtype=np.float64)
         self.state = SimState.zeros(n, self.sensors, W_MAX, S_MAX, poses)
+        if self.cameras is not None:
+            self.cameras.reset(self.state)
         # command buffers: twist (N, 3) and wheels (N, 3 = up to 4 driven? ) per robot
         self._cmd_twist = np.zeros((n, 3))
         self._cmd_wheels = np.zeros((n, W_MAX + 1))
@@ -192,6 +199,7 @@ class Simulation:
             elif hasattr(b.controller, "reset"):
                 b.controller.reset()
         self._sense(force=True)
+        self._render(force=True)
 
     # ------------------------------------------------------------------ the step
     def step(self) -> None:
@@ -203,6 +211,7 @@ class Simulation:
         self.state.t_s = (self.state.step + 1) * self.dt_s
         self.state.step += 1
         self._sense()
+        self._render()
 
     def run(self, duration_s: float) -> None:
         for _ in range(int(round(duration_s / self.dt_s))):
@@ -327,8 +336,10 @@ class Simulation:
     def set_grid(self, grid: OccupancyGrid) -> None:
         """Change the walls of the running simulation (a maze editor). Same resolution and
         extent or not: sensors and collisions use the new grid from the next step on."""
-        self.world = World(grid, self.world.boxes)
+        self.world = dc_replace(self.world, grid=grid)
         self.caster.set_grid(grid)
+        if self.cameras is not None:
+            self.cameras.set_world(self.world)
         self.collider.set_grid(grid)
         self._substep_len = 0.5 * min(grid.resolution_m, float(self._half.min()))
 
@@ -449,6 +460,15 @@ class Simulation:
             st.scans[s, :width] = exact
         st.scan_stamp[s] = st.t_s
         st.next_scan_s[s] = st.t_s + tab.period_s[s]
+
+    def _render(self, force: bool = False) -> None:
+        """Render the cameras that are due (see :mod:`agvsim.sensors.camera_rig`)."""
+        if self.cameras is not None:
+            self.cameras.render_due(self.state, self.footprints(self.state.poses), force)
+
+    def camera_frames(self) -> list[CameraFrame]:
+        """The latest frame of every camera of every robot (empty without cameras)."""
+        return [] if self.cameras is None else self.cameras.frames(self.state)
 
     # ------------------------------------------------------------------ observations
     def scan(self, slot: int) -> LaserScan:

@@ -7,6 +7,7 @@ Functions of a ``Simulation``; its ``scan``, ``observation``, ``batch_observatio
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -31,12 +32,33 @@ def scan(sim: Simulation, slot: int) -> LaserScan:
     )
 
 
+@dataclass(frozen=True)
+class CameraObservation(Observation):
+    """An ``Observation`` with the robot's camera frames, by camera name (empty without
+    cameras): ``images[name]`` ``(H, W, 3)`` uint8 RGB, ``depth[name]`` ``(H, W)`` float32
+    z-depth in m (inf: nothing within range), ``image_stamps[name]`` the frame's time, s. The
+    arrays are read-only and stay as they are: a new frame is a new array."""
+
+    images: dict[str, np.ndarray] = field(default_factory=dict)
+    depth: dict[str, np.ndarray] = field(default_factory=dict)
+    image_stamps: dict[str, float] = field(default_factory=dict)
+
+
 def observation(sim: Simulation, i: int) -> Observation:
     st = sim.state
     robot = sim.robots[i]
     scans = {sim.sensors.specs[s].name: scan(sim, s) for s in sim.sensors.slots_of[i]}
     w = len(robot.model.wheel_names)
-    return Observation(
+    images: dict[str, np.ndarray] = {}
+    depth: dict[str, np.ndarray] = {}
+    stamps: dict[str, float] = {}
+    cams = sim.cameras
+    if cams is not None:
+        for c in cams.slots_of[i]:
+            name = cams.specs[c].name
+            images[name], depth[name] = st.images[c], st.depths[c]
+            stamps[name] = float(st.image_stamp[c])
+    return CameraObservation(
         t_s=st.t_s,
         name=robot.name,
         scans=scans,
@@ -48,6 +70,9 @@ def observation(sim: Simulation, i: int) -> Observation:
         model=robot.model,
         mode=str(robot.mode),
         dt_s=sim.dt_s,
+        images=images,
+        depth=depth,
+        image_stamps=stamps,
     )
 
 

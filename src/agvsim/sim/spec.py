@@ -8,8 +8,17 @@ from enum import StrEnum
 import numpy as np
 
 from agvsim.kinematics.base import KinematicModel
+from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.world.grid import OccupancyGrid
+from agvsim.world.markers import Appearance
+
+# Heights of the 3D world (m), shared by the onboard camera and the browser app: walls are the
+# occupancy grid extruded to WALL_HEIGHT_M, static boxes stand BOX_HEIGHT_M tall, and a robot's
+# body is BODY_HEIGHT_M tall on top of its wheels (see RobotSpec.height_m).
+WALL_HEIGHT_M = 1.0
+BOX_HEIGHT_M = 1.0
+BODY_HEIGHT_M = 0.25
 
 
 class ControlMode(StrEnum):
@@ -40,6 +49,7 @@ class RobotSpec:
     body_offset_x_m: float = 0.0  # footprint centre ahead of the reference point P
     initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x m, y m, theta rad (world)
     sensors: tuple[RangeSensorSpec, ...] = ()
+    cameras: tuple[CameraSpec, ...] = ()
     odometry: OdometrySpec = field(default_factory=OdometrySpec)
     color: str = "#d62728"
 
@@ -52,11 +62,19 @@ class RobotSpec:
         hl, hw = self.footprint_half_m
         return float(np.hypot(abs(self.body_offset_x_m) + hl, hw))
 
+    @property
+    def height_m(self) -> float:
+        """Top of the body above the floor: it sits on the axles (wheel radius) and is
+        BODY_HEIGHT_M tall."""
+        r = float(np.asarray(getattr(self.model, "wheel_radius_m", 0.1)).reshape(-1)[0])
+        return r + BODY_HEIGHT_M
+
 
 @dataclass(frozen=True)
 class World:
     grid: OccupancyGrid
     boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # (K, 5) static boxes
+    appearance: Appearance = field(default_factory=Appearance)  # colours, markers (camera)
 
     def __post_init__(self) -> None:
         b = np.asarray(self.boxes, dtype=np.float64).reshape(-1, 5)

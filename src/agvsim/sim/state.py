@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -121,6 +121,13 @@ class SimState:
     scans: np.ndarray  # (S, B_max) latest readings per sensor slot
     scan_stamp: np.ndarray  # (S,) time of the latest reading
     next_scan_s: np.ndarray  # (S,) when each sensor fires next
+    # cameras (C slots, agvsim.sensors.camera_rig; empty without cameras): latest frames
+    images: list[np.ndarray] = field(default_factory=list)  # (H, W, 3) uint8 each, read-only
+    depths: list[np.ndarray] = field(default_factory=list)  # (H, W) float32 z-depth m each
+    image_stamp: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (C,) frame time
+    image_seq: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (C,) frames
+    image_pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (C, 3) at frame
+    next_image_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (C,) next frame
 
     @classmethod
     def zeros(

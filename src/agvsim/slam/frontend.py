@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from agvsim.slam import scan_matching as sm
@@ -49,9 +50,47 @@ class TrackingConfig:
     gn_prior_weight: float = 1e-4
     submap_keyframes: int = 40  # keyframes per submap
     submap_half_size_m: float = 45.0  # live submap grid: +- this around its origin
+    surface_gap_m: float = 0.5  # neighbouring returns closer than this are joined in the field
     l_hit: float = 0.85
     l_miss: float = -0.4
     l_clamp: float = 4.0
+
+
+@njit(cache=True)
+def densify_surface(
+    ends: np.ndarray, hits: np.ndarray, max_gap_m: float, step_m: float
+) -> np.ndarray:
+    """The hit points ``ends[hits]`` (in beam order) plus points every ``step_m`` on the segment
+    between two neighbouring hits closer than ``max_gap_m``: one scan's returns on a wall lie a
+    beam spacing apart (13 cm at 5 m for 1.5 degree beams); joined, the wall is a ridge in the
+    likelihood field instead of a row of bumps that would pull the next scan back onto the same
+    beam pattern (along a corridor whose ends are out of range)."""
+    n = ends.shape[0]
+    count = 0
+    for k in range(n):
+        if hits[k]:
+            count += 1
+            if k + 1 < n and hits[k + 1]:
+                gap = math.hypot(ends[k + 1, 0] - ends[k, 0], ends[k + 1, 1] - ends[k, 1])
+                if gap <= max_gap_m:
+                    count += int(gap / step_m)
+    out = np.empty((count, 2))
+    j = 0
+    for k in range(n):
+        if not hits[k]:
+            continue
+        out[j, 0], out[j, 1] = ends[k, 0], ends[k, 1]
+        j += 1
+        if k + 1 < n and hits[k + 1]:
+            dx, dy = ends[k + 1, 0] - ends[k, 0], ends[k + 1, 1] - ends[k, 1]
+            gap = math.hypot(dx, dy)
+            if gap <= max_gap_m:
+                m = int(gap / step_m)
+                for i in range(1, m + 1):
+                    f = i / (m + 1)
+                    out[j, 0], out[j, 1] = ends[k, 0] + f * dx, ends[k, 1] + f * dy
+                    j += 1
+    return out[:j]
 
 
 @dataclass
@@ -86,7 +125,10 @@ class Submap:
             -cfg.l_clamp,
             cfg.l_clamp,
         )
-        stamp_points(self.likelihood, self.ox, self.oy, res, ends[hits], self.kernel)
+        pts = ends[hits]
+        if cfg.surface_gap_m > 0:
+            pts = densify_surface(ends, hits, cfg.surface_gap_m, 0.5 * res)
+        stamp_points(self.likelihood, self.ox, self.oy, res, pts, self.kernel)
         self.nodes.append(node)
 
     def finish(self, cfg: TrackingConfig) -> None:

@@ -55,6 +55,7 @@ class LoopConfig:
     min_eigen_ratio: float = 0.02  # floor of the information along weak directions (corridors)
     pyramid_levels: int = 6
     gn_iterations: int = 15
+    jump_drift_factor: float = 2.0  # a match may move a node agree_m + this x drift bound
 
 
 @dataclass(frozen=True)
@@ -157,6 +158,11 @@ class LoopDetector:
         score = sm.score_pose(s.likelihood, s.ox, s.oy, self.res, points, pose)
         if score2 >= score and np.all(np.abs(refined[:2] - pose[:2]) < 2 * self.res):
             pose, score = refined, score2
+        jump = between(guess, pose)
+        if math.hypot(jump[0], jump[1]) > cfg.agree_m + cfg.jump_drift_factor * drift_m:
+            # farther from the graph's estimate than local SLAM can have drifted: in a maze or
+            # a row of equal rooms the same walls fit one period off
+            return None
         meas = between(s.origin, pose)
         return LoopClosure(
             node,

@@ -21,6 +21,7 @@ import numpy as np
 from agvsim.slam.carmen import CarmenLog, ScanRecord
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.mapping import save_map_png, save_ros_map
+from agvsim.slam.recording import McapScanLog
 
 __all__ = ["READERS", "OfflineResult", "ScanLog", "open_log", "run_offline", "write_trajectory"]
 
@@ -36,6 +37,7 @@ class ScanLog(Protocol):
 READERS: dict[str, Callable[[Path], ScanLog]] = {
     ".clf": CarmenLog,
     ".clf.gz": CarmenLog,
+    ".mcap": McapScanLog,  # agvsim's own recordings (run.mcap), agvsim.slam.recording
 }
 
 

@@ -1,0 +1,415 @@
+"""Record a simulation to MCAP with ROS 2 message layouts (see docs/recording.md).
+
+    rec = Recorder("run.mcap", sim, scenario_yaml=text)   # writes the static topics at t
+    for _ in range(n):
+        sim.step()
+        rec.record()                                      # what changed this step
+    rec.close()                                           # summary and index
+
+Topics (``<robot>`` and ``<sensor>`` are the names from the scenario, characters outside
+``[A-Za-z0-9_]`` replaced by ``_``):
+
+==============================  ===========================  ==================================
+topic                           type                         when
+==============================  ===========================  ==================================
+/agvsim/scenario                std_msgs/String              once, t = 0: the scenario YAML
+/tf_static                      tf2_msgs/TFMessage           once: base_link -> each sensor
+/map                            nav_msgs/OccupancyGrid       t = 0 and whenever the walls change
+/tf                             tf2_msgs/TFMessage           pose rate: map -> odom -> base_link
+/<robot>/ground_truth           nav_msgs/Odometry            pose rate (map frame)
+/<robot>/odom                   nav_msgs/Odometry            pose rate (<robot>/odom frame)
+/<robot>/<sensor>               sensor_msgs/LaserScan        each time the sensor fires
+/<robot>/state                  std_msgs/String              when the controller state changes
+/<robot>/<camera>/image/...     sensor_msgs/CompressedImage  every camera frame (JPEG)
+/<robot>/slam/map               nav_msgs/OccupancyGrid       ``write_slam_map`` (online SLAM)
+==============================  ===========================  ==================================
+
+Message times (log, publish and header stamps) are the simulated time, from 0. The file is
+streamed: a chunk is written at least every ``flush_sim_s`` simulated seconds and every
+``flush_wall_s`` wall seconds, and the file is valid after each (see ``mcap_file``).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from agvsim.record import ros2msg as msg
+from agvsim.record.mcap_file import McapStreamWriter
+from agvsim.record.ros2msg import topic_name
+
+__all__ = ["Recorder", "odom_twists", "scenario_yaml", "topic_name"]
+
+
+def odom_twists(p0: np.ndarray, p1: np.ndarray, dt_s: float) -> np.ndarray:
+    """The constant body twists (N, 3) that carry poses ``p0`` to ``p1`` (N, 3) in ``dt_s``:
+    the SE(2) logarithm of the relative motion over the time (exact for the simulator's
+    constant-twist steps)."""
+    p0, p1 = np.asarray(p0, dtype=np.float64), np.asarray(p1, dtype=np.float64)
+    c, s = np.cos(p0[:, 2]), np.sin(p0[:, 2])
+    d = p1 - p0
+    rx, ry = c * d[:, 0] + s * d[:, 1], c * d[:, 1] - s * d[:, 0]  # in the frame of p0
+    a = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi  # the wrapped turn
+    # V(a)^-1 (rx, ry) with V = [[sin a / a, -(1 - cos a) / a], [(1 - cos a) / a, sin a / a]]:
+    # (a / 2) [[cot(a / 2), 1], [-1, cot(a / 2)]] (rx, ry); a -> 0 gives (rx, ry)
+    h = 0.5 * a
+    small = np.abs(h) < 1e-6
+    hc = np.where(small, 1.0 - h * h / 3.0, h / np.tan(np.where(small, 1.0, h)))  # h cot h
+    out = np.empty_like(p0)
+    out[:, 0] = hc * rx + h * ry
+    out[:, 1] = hc * ry - h * rx
+    out[:, 2] = a
+    return out / dt_s
+
+
+def _ns(t_s: float) -> int:
+    return int(round(t_s * 1e9))
+
+
+def _grid_cells_ros(occupied: np.ndarray) -> np.ndarray:
+    """Our ``occupied[row, col]`` (row 0 north) -> ROS cells (row 0 south), 0 / 100."""
+    return np.ascontiguousarray(occupied[::-1]).astype(np.int8) * np.int8(100)
+
+
+class Recorder:
+    """Records a ``Simulation`` into ``path`` (an ``.mcap`` file, ROS 2 layouts).
+
+    ``pose_rate_hz`` caps how often /tf and the odometry topics are written (every step when
+    the step is longer); scans follow each sensor's rate. The constructor writes the static
+    topics and the state at the current time."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        sim,
+        scenario_yaml: str | None = None,
+        *,
+        pose_rate_hz: float = 50.0,
+        flush_sim_s: float = 1.0,
+        flush_wall_s: float = 1.0,
+        compression: str = "lz4",
+        metadata: dict[str, str] | None = None,
+    ):
+        if not pose_rate_hz > 0:
+            raise ValueError(f"pose_rate_hz must be > 0, got {pose_rate_hz}")
+        self.sim = sim
+        self.path = Path(path)
+        self.pose_period_s = 1.0 / pose_rate_hz
+        self.flush_sim_s, self.flush_wall_s = float(flush_sim_s), float(flush_wall_s)
+        self.writer = McapStreamWriter(self.path, compression=compression)
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.robot_topics = [topic_name(r.name) for r in sim.robots]
+        tab = sim.sensors
+        self._scan_topics = [
+            f"/{self.robot_topics[int(tab.owner[s])]}/{topic_name(tab.specs[s].name)}"
+            for s in range(tab.count)
+        ]
+        self._scan_frames = [t[1:] for t in self._scan_topics]
+        self._scan_channels = [
+            (
+                self._channel(self._scan_topics[s], msg.LASER_SCAN),
+                msg.LaserScanEncoder(
+                    self._scan_frames[s],
+                    sp.angle_min_rad,
+                    sp.angle_increment_rad,
+                    sp.range_min_m,
+                    sp.range_max_m,
+                    1.0 / sp.rate_hz,
+                    sp.num_beams,
+                ),
+            )
+            for s, sp in enumerate(tab.specs)
+        ]
+        self._pose_channels = [
+            (
+                self._channel(f"/{rt}/ground_truth", msg.ODOMETRY),
+                self._channel(f"/{rt}/odom", msg.ODOMETRY),
+                msg.OdometryEncoder("map", f"{rt}/base_link"),
+                msg.OdometryEncoder(f"{rt}/odom", f"{rt}/base_link"),
+            )
+            for rt in self.robot_topics
+        ]
+        pairs = []
+        for rt in self.robot_topics:
+            pairs += [("map", f"{rt}/odom"), (f"{rt}/odom", f"{rt}/base_link")]
+        self._tf = msg.TfEncoder(pairs)
+        self._tf_channel = self._channel("/tf", msg.TF_MESSAGE)
+        frames = sim_frames(sim)
+        self._camera_seq = {f.slot: 0 for f in frames}
+        self._camera_names = {
+            f.slot: f"{topic_name(f.robot_name)}/{topic_name(f.camera)}" for f in frames
+        }
+        self._last_scan = np.full(tab.count, -np.inf)
+        self._last_states: list[str | None] = [None] * sim.n
+        self._grid = None
+        self._next_pose_s = -np.inf
+        self._recorded_s = -np.inf
+        self._prev_odom: tuple[float, np.ndarray] | None = None
+        self._last_flush_s = sim.state.t_s
+        self._last_flush_wall = time.perf_counter()
+        meta = {"format": "agvsim recording 1", "dt_s": repr(sim.dt_s), "seed": str(sim.seed)}
+        meta["robots"] = ",".join(r.name for r in sim.robots)
+        if scenario_yaml is not None:
+            meta["scenario_yaml"] = scenario_yaml
+        meta.update(metadata or {})
+        self.writer.add_metadata("agvsim", meta)
+        t_ns = _ns(sim.state.t_s)
+        if scenario_yaml is not None:
+            self._write("/agvsim/scenario", msg.STRING, t_ns, msg.encode_string(scenario_yaml))
+        self._write_tf_static(t_ns)
+        self.record()
+        self.writer.flush()
+
+    # ------------------------------------------------------------------ channels
+    def _channel(self, topic: str, type_name: str) -> int:
+        cid = self._channels.get(topic)
+        if cid is None:
+            sid = self._schemas.get(type_name)
+            if sid is None:
+                text = msg.schema_text(type_name).encode()
+                sid = self.writer.add_schema(type_name, "ros2msg", text)
+                self._schemas[type_name] = sid
+            cid = self.writer.add_channel(topic, sid, "cdr")
+            self._channels[topic] = cid
+        return cid
+
+    def _write(self, topic: str, type_name: str, t_ns: int, data: bytes) -> None:
+        self.writer.add_message(self._channel(topic, type_name), t_ns, data)
+
+    # ------------------------------------------------------------------ static topics
+    def _write_tf_static(self, t_ns: int) -> None:
+        tab = self.sim.sensors
+        tfs = []
+        for s in range(tab.count):
+            base = f"{self.robot_topics[int(tab.owner[s])]}/base_link"
+            mx, my, myaw = (float(v) for v in tab.mount[s])
+            tfs.append((base, self._scan_frames[s], mx, my, myaw))
+        for f in sim_frames(self.sim):
+            spec = self.sim.robots[f.robot].cameras[self._camera_index(f)]
+            base = f"{self.robot_topics[f.robot]}/base_link"
+            x, y = spec.mount_xy_m
+            tfs.append((base, self._camera_names[f.slot], x, y, spec.mount_yaw_rad))
+        if tfs:
+            self._write("/tf_static", msg.TF_MESSAGE, t_ns, msg.encode_tf(t_ns, tfs))
+
+    # ------------------------------------------------------------------ every step
+    def record(self) -> None:
+        """Write what is due at the simulation's current time."""
+        sim = self.sim
+        st = sim.state
+        t_s = st.t_s
+        t_ns = _ns(t_s)
+        self._recorded_s = t_s
+        if sim.world.grid is not self._grid:
+            self._grid = sim.world.grid
+            g = self._grid
+            self.write_occupancy("/map", t_s, _grid_cells_ros(g.occupied), g.resolution_m,
+                                 g.origin_xy_m, trinary=True)  # fmt: skip
+        if t_s >= self._next_pose_s - 1e-9:
+            self._write_poses(t_s, t_ns)
+            self._next_pose_s = t_s + self.pose_period_s
+        self._write_scans(t_ns)
+        if self._camera_seq:
+            self._write_cameras()
+        self._write_states(t_ns)
+        wall = time.perf_counter()
+        if (
+            t_s - self._last_flush_s >= self.flush_sim_s - 1e-9
+            or wall - self._last_flush_wall >= self.flush_wall_s
+            or self.writer.chunk_bytes > (8 << 20)
+        ):
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the collected messages now; the file on disk is complete afterwards."""
+        self.writer.flush()
+        self._last_flush_s = self.sim.state.t_s
+        self._last_flush_wall = time.perf_counter()
+
+    def _write_poses(self, t_s: float, t_ns: int) -> None:
+        st = self.sim.state
+        gt, odo, tw = st.poses, st.odom_poses, st.twists
+        if self._prev_odom is None or t_s <= self._prev_odom[0]:
+            otw = np.zeros_like(odo)
+        else:
+            otw = odom_twists(self._prev_odom[1], odo, t_s - self._prev_odom[0])
+        self._prev_odom = (t_s, odo.copy())
+        # map -> odom = T_map_base(ground truth) * inverse(T_odom_base(odometry))
+        dth = gt[:, 2] - odo[:, 2]
+        c, s = np.cos(dth), np.sin(dth)
+        tf = np.empty((2 * len(gt), 3))
+        tf[0::2, 0] = gt[:, 0] - (c * odo[:, 0] - s * odo[:, 1])
+        tf[0::2, 1] = gt[:, 1] - (s * odo[:, 0] + c * odo[:, 1])
+        tf[0::2, 2] = dth
+        tf[1::2] = odo
+        write = self.writer.add_message
+        gt_l, odo_l, tw_l, otw_l = gt.tolist(), odo.tolist(), tw.tolist(), otw.tolist()
+        for i, (c_gt, c_odo, e_gt, e_odo) in enumerate(self._pose_channels):
+            write(c_gt, t_ns, e_gt.encode(t_ns, gt_l[i], tw_l[i]))
+            write(c_odo, t_ns, e_odo.encode(t_ns, odo_l[i], otw_l[i]))
+        write(self._tf_channel, t_ns, self._tf.encode(t_ns, tf))
+
+    def _write_scans(self, t_ns: int) -> None:
+        st, tab = self.sim.state, self.sim.sensors
+        if tab.count == 0:
+            return
+        fresh = np.flatnonzero(st.scan_stamp > self._last_scan)
+        for s in fresh.tolist():
+            cid, enc = self._scan_channels[s]
+            stamp = _ns(float(st.scan_stamp[s]))
+            self.writer.add_message(cid, stamp, enc.encode(stamp, st.scans[s, : enc.num_beams]))
+        self._last_scan[fresh] = st.scan_stamp[fresh]
+
+    def _camera_index(self, frame) -> int:
+        names = [c.name for c in self.sim.robots[frame.robot].cameras]
+        return names.index(frame.camera)
+
+    def _write_cameras(self) -> None:
+        for f in sim_frames(self.sim):
+            if f.seq > self._camera_seq[f.slot]:
+                self._camera_seq[f.slot] = f.seq
+                name = self._camera_names[f.slot]
+                self.write_image(f"/{name}/image/compressed", f.stamp_s, name, f.rgb, "jpeg")
+
+    def _write_states(self, t_ns: int) -> None:
+        states = self.sim.active_states()
+        for i, name in enumerate(states):
+            if name != self._last_states[i]:
+                if name or self._last_states[i] is not None:
+                    topic = f"/{self.robot_topics[i]}/state"
+                    self._write(topic, msg.STRING, t_ns, msg.encode_string(name))
+                self._last_states[i] = name
+
+    # ------------------------------------------------------------------ public extras
+    def write_occupancy(
+        self,
+        topic: str,
+        t_s: float,
+        occupancy: np.ndarray,
+        resolution_m: float,
+        origin_xy: tuple[float, float],
+        *,
+        frame_id: str = "map",
+        trinary: bool = False,
+    ) -> None:
+        """Write a ``nav_msgs/OccupancyGrid`` on ``topic`` (e.g. ``/<robot>/slam/map``).
+
+        ``occupancy`` is (rows, cols) with **row 0 north** (our map layout): floats are
+        occupancy probabilities in [0, 1] (NaN = unknown), written as 0..100 (-1); integers are
+        ROS cell values already (0 free, 100 occupied, -1 unknown). ``trinary=True`` takes ROS
+        cell values in ROS row order (row 0 south), as ``/map`` is built. ``origin_xy`` is the
+        map's lower-left corner (m)."""
+        occ = np.asarray(occupancy)
+        if occ.ndim != 2:
+            raise ValueError(f"{topic}: occupancy must be a 2-D array, got shape {occ.shape}")
+        if trinary or np.issubdtype(occ.dtype, np.integer):
+            bad = (occ < -1) | (occ > 100)
+            if bad.any():
+                raise ValueError(
+                    f"{topic}: occupancy cell values must be -1 (unknown) or 0..100, got "
+                    f"{occ[bad].ravel()[0]}"
+                )
+            cells = occ.astype(np.int8)
+            if not trinary:
+                cells = np.ascontiguousarray(cells[::-1])
+        else:
+            p = occ.astype(np.float64)[::-1]
+            cells = np.where(np.isfinite(p), np.rint(np.clip(p, 0.0, 1.0) * 100), -1)
+            cells = cells.astype(np.int8)
+        t_ns = _ns(t_s)
+        data = msg.encode_occupancy_grid(t_ns, frame_id, cells, resolution_m, origin_xy)
+        self._write(topic, msg.OCCUPANCY_GRID, t_ns, data)
+
+    def write_slam_map(self, robot: str, t_s: float, occupancy_map) -> None:
+        """A SLAM map (``agvsim.slam.mapping.OccupancyMap``: log-odds ``[iy, ix]``, row 0
+        south) on ``/<robot>/slam/map``, frame ``map``."""
+        prob = occupancy_map.probability[::-1]  # to row 0 north
+        known = occupancy_map.logodds[::-1] != 0
+        self.write_occupancy(
+            f"/{topic_name(robot)}/slam/map",
+            t_s,
+            np.where(known, prob, np.nan),
+            occupancy_map.resolution_m,
+            occupancy_map.origin_xy_m,
+        )
+
+    def write_image(
+        self, topic: str, t_s: float, frame_id: str, image: np.ndarray | bytes, fmt: str = "jpeg"
+    ) -> None:
+        """Write a ``sensor_msgs/CompressedImage``: ``image`` is (H, W, 3) uint8 RGB (encoded
+        here as ``fmt``, ``"jpeg"`` or ``"png"``) or already encoded bytes. The camera hook:
+        topic ``/<robot>/<camera>/image/compressed``, frame ``<robot>/<camera>``."""
+        if fmt not in ("jpeg", "png"):
+            raise ValueError(f"{topic}: image format must be 'jpeg' or 'png', got {fmt!r}")
+        if isinstance(image, bytes | bytearray):
+            data = bytes(image)
+        else:
+            data = encode_image(np.asarray(image), fmt)
+        t_ns = _ns(t_s)
+        self._write(topic, msg.COMPRESSED_IMAGE, t_ns,
+                    msg.encode_compressed_image(t_ns, frame_id, fmt, data))  # fmt: skip
+
+    def close(self) -> None:
+        """Write the last messages, the summary and the footer (idempotent). A step that ran
+        but was not recorded (Ctrl-C between the two) is recorded first."""
+        if not self.writer.closed and self.sim.state.t_s > self._recorded_s:
+            self.record()
+        self.writer.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class SlamMaps:
+    """Writes each online SLAM's final map on ``/<robot>/slam/map`` when the run ends (put it
+    before the recorder in the runner's observers, so it closes first)."""
+
+    def __init__(self, recorder: Recorder, slams: list):
+        self.recorder, self.slams = recorder, slams
+
+    def record(self) -> None:
+        pass
+
+    def close(self) -> None:
+        for s in self.slams:
+            s.finish()
+            if s.slam.keyframes:
+                self.recorder.write_slam_map(s.name, self.recorder.sim.state.t_s,
+                                             s.slam.occupancy_map())  # fmt: skip
+
+
+def scenario_yaml(sc, seed: int | None = None) -> str:
+    """The scenario as YAML (the keys the user set), with the run's ``seed``."""
+    import yaml
+
+    data = sc.model_dump(mode="json", exclude_unset=True)
+    if seed is not None:
+        data["seed"] = int(seed)
+    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
+
+
+def sim_frames(sim) -> list:
+    """The simulation's latest camera frames (none for a simulation without cameras)."""
+    return sim.camera_frames() if hasattr(sim, "camera_frames") else []
+
+
+def encode_image(rgb: np.ndarray, fmt: str = "jpeg", quality: int = 85) -> bytes:
+    """(H, W, 3) uint8 -> JPEG or PNG bytes (Pillow)."""
+    import io
+
+    from PIL import Image
+
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+        raise ValueError(f"an image must be (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
+    buf = io.BytesIO()
+    if fmt == "jpeg":
+        Image.fromarray(rgb).save(buf, format="JPEG", quality=quality)
+    else:
+        Image.fromarray(rgb).save(buf, format="PNG", compress_level=1)
+    return buf.getvalue()

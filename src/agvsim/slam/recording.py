@@ -1,0 +1,93 @@
+"""Our own recordings as SLAM logs: :class:`McapScanLog` reads ``run.mcap`` (``agvsim run``).
+
+Each scan of the chosen robot's lidar (``/<robot>/<sensor>``, ``sensor_msgs/LaserScan``)
+becomes a :class:`~agvsim.slam.carmen.ScanRecord`: its header stamp, ranges (``inf`` kept for no
+return), beam angles in the laser frame, ``range_max``, the wheel-odometry pose of the robot at
+the scan's time (``/<robot>/odom``, interpolated between its two neighbours) and the laser's
+mount (``/tf_static``: ``<robot>/base_link`` -> ``<robot>/<sensor>``). By default the first
+robot (scenario order) with a lidar is used.
+
+Reading goes through :mod:`agvsim.record.mcap_reader` (rosbags); the simulator is never
+imported.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from agvsim.record.mcap_reader import Recording, RecordingError
+from agvsim.record.ros2msg import topic_name
+from agvsim.slam.carmen import ScanRecord
+
+__all__ = ["McapScanLog", "interpolate_poses"]
+
+
+def interpolate_poses(t_query: np.ndarray, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Planar poses (T, 3) sampled at increasing times ``t`` (T,), read at ``t_query``:
+    linear in x, y and in the (unwrapped) heading, clamped to the ends, heading wrapped back
+    to (-pi, pi]."""
+    t = np.asarray(t, dtype=np.float64)
+    poses = np.asarray(poses, dtype=np.float64)
+    th = np.unwrap(poses[:, 2])
+    x = np.interp(t_query, t, poses[:, 0])
+    y = np.interp(t_query, t, poses[:, 1])
+    a = np.interp(t_query, t, th)
+    a = np.pi - np.mod(np.pi - a, 2 * np.pi)  # wrapped to (-pi, pi]
+    return np.column_stack([x, y, a])
+
+
+class McapScanLog:
+    """A recording's lidar scans with odometry, as the offline SLAM reads them.
+
+    ``robot`` and ``sensor`` pick the scans (names as in the scenario); by default the first
+    robot with a lidar and its first lidar."""
+
+    def __init__(self, path: str | Path, robot: str | None = None, sensor: str | None = None):
+        self.path = Path(path)
+        rec = Recording(self.path)
+        choices = rec.lidar_topics()
+        if not choices:
+            raise RecordingError(f"{self.path}: the recording holds no laser scans")
+        pick = [
+            c
+            for c in choices
+            if (robot is None or topic_name(robot) == topic_name(c[0]))
+            and (sensor is None or topic_name(sensor) == c[1])
+        ]
+        if not pick:
+            have = ", ".join(f"{r}/{s}" for r, s, _ in choices)
+            raise RecordingError(
+                f"{self.path}: no scans for robot {robot!r} sensor {sensor!r}; have {have}"
+            )
+        self.robot, self.sensor, self.topic = pick[0]
+        rt = topic_name(self.robot)
+        self.scans = rec.laser_scans(self.topic)
+        odom_topic = f"/{rt}/odom"
+        t_odom, odom, _ = rec.odometry(odom_topic)
+        if len(t_odom) == 0:
+            raise RecordingError(f"{self.path}: {odom_topic} holds no odometry")
+        self.odom_poses = interpolate_poses(self.scans.t_s, t_odom, odom)
+        mount = rec.static_transforms().get(self.scans.frame_id)
+        self.laser_offset = np.array(mount[1:] if mount is not None else (0.0, 0.0, 0.0))
+
+    def __len__(self) -> int:
+        return len(self.scans.t_s)
+
+    def __iter__(self) -> Iterator[ScanRecord]:
+        s = self.scans
+        angles = s.angles_rad
+        for k in range(len(s.t_s)):
+            ranges = s.ranges[k].copy()
+            # -inf (closer than range_min) and 0 (inside a wall) carry no usable distance
+            ranges[~(ranges > 0)] = np.inf
+            yield ScanRecord(
+                float(s.t_s[k]),
+                ranges,
+                angles.copy(),
+                s.range_max_m,
+                self.odom_poses[k].copy(),
+                self.laser_offset.copy(),
+            )

@@ -1,0 +1,47 @@
+"""The browser app's sensor camera view (thesis Fig. 33): the picked robot's camera frame shows
+in the panel and follows new frames; a robot without a camera shows none."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agvsim.scenario import load_scenario, parse_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture()
+def app():
+    pytest.importorskip("viser")
+    from agvsim.app.server import App
+    from agvsim.app.session import Session
+    from agvsim.bench_app import free_port
+
+    data = load_scenario(ROOT / "scenarios" / "marker_search.yaml").model_dump(exclude_none=True)
+    data["robots"].append(
+        {"name": "blind", "model": "differential", "pose": {"x_m": -3.5, "y_m": -3.0}}
+    )
+    a = App(Session(parse_scenario(data)), port=free_port())  # loops not started: driven here
+    yield a
+    a.server.stop()
+
+
+def test_the_picked_robots_camera_frame_is_shown_and_follows_new_frames(app):
+    panel, session = app.panel, app.session
+    panel._select("seeker")
+    panel.refresh()
+    view = panel.camera_view
+    assert view is not None
+    assert np.array_equal(view.image, np.asarray(session.sim.state.images[0]))
+    assert "seeker" in panel._camera_label
+    for _ in range(10):  # 0.2 s: two new frames at 10 Hz
+        session.sim.step()
+    panel.refresh()
+    assert panel.camera_view is view
+    assert np.array_equal(view.image, np.asarray(session.sim.state.images[0]))
+    panel._select("blind")
+    panel.refresh()
+    assert panel.camera_view is None

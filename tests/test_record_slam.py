@@ -1,0 +1,144 @@
+"""The offline SLAM reads our recordings: ``agvsim slam run.mcap`` (McapScanLog)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rosbags")
+
+from agvsim.record.mcap_reader import RecordingError  # noqa: E402
+from agvsim.record.mcap_writer import Recorder, scenario_yaml  # noqa: E402
+from agvsim.scenario import build, parse_scenario  # noqa: E402
+from agvsim.slam.offline import open_log, run_offline  # noqa: E402
+from agvsim.slam.recording import McapScanLog, interpolate_poses  # noqa: E402
+
+SCENARIO = {
+    "name": "slam room",
+    "world": {"picture": "##########\n#........#\n#..##....#\n#........#\n##########"},
+    "robots": [
+        {
+            "name": "scout",
+            "model": "differential",
+            "pose": {"x_m": -2.5, "y_m": -0.5},
+            "sensors": [{"type": "rangers"}],
+            "controller": {"type": "idle"},
+        },
+        {
+            "name": "mapper",
+            "model": "differential",
+            "pose": {"x_m": -3.0, "y_m": 0.5},
+            "odometry": {"wheel_noise_rel": 0.05},
+            "sensors": [
+                {"type": "rangers"},
+                {
+                    "type": "lidar",
+                    "beams": 120,
+                    "range_max_m": 8.0,
+                    "mount_x_m": 0.15,
+                    "mount_yaw_deg": 10,
+                    "range_min_m": 0.2,
+                },
+            ],  # fmt: skip
+            "controller": {"type": "script", "steps": [{"duration_s": 10, "twist": [0.6, 0.3]}]},
+        },
+    ],
+}
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    sim = build(parse_scenario(SCENARIO, "slam room"))
+    path = tmp_path_factory.mktemp("slam") / "run.mcap"
+    rec = Recorder(path, sim, scenario_yaml(parse_scenario(SCENARIO, "s"), 0))
+    odom = {0.0: sim.state.odom_poses[1].copy()}
+    scans = {0.0: sim.state.scans[2, :120].copy()}
+    for _ in range(150):  # 3 s
+        sim.step()
+        rec.record()
+        odom[round(sim.state.t_s, 6)] = sim.state.odom_poses[1].copy()
+        scans[round(float(sim.state.scan_stamp[2]), 6)] = sim.state.scans[2, :120].copy()
+    rec.close()
+    return path, odom, scans
+
+
+def test_scan_log_yields_the_lidar_with_odometry_and_mount(recording):
+    path, odom, scans = recording
+    log = open_log(path)  # ".mcap" is registered
+    assert isinstance(log, McapScanLog)
+    assert (log.robot, log.sensor) == ("mapper", "lidar")  # the first robot WITH a lidar
+    records = list(log)
+    assert len(log) == len(records) == 31  # 10 Hz over 3 s, t = 0 included
+    for rec in records:
+        t = round(rec.timestamp_s, 6)
+        np.testing.assert_allclose(rec.odom_pose, odom[t], atol=1e-12)
+        expect = scans[t].astype(np.float32).astype(np.float64)
+        expect[~(expect > 0)] = np.inf  # -inf (closer than range_min) carries no distance
+        np.testing.assert_array_equal(rec.ranges_m, expect)
+        assert rec.max_range_m == 8.0
+    np.testing.assert_allclose(records[0].laser_offset, [0.15, 0.0, np.deg2rad(10)], atol=1e-12)
+    np.testing.assert_allclose(
+        records[0].angles_rad, -np.pi + np.arange(120) * (2 * np.pi / 120), atol=1e-6
+    )
+
+
+def test_scan_log_picks_robot_and_sensor(recording):
+    path, _, _ = recording
+    log = McapScanLog(path, robot="scout", sensor="rangers")
+    assert log.topic == "/scout/rangers" and len(log) == 151
+    with pytest.raises(RecordingError, match="no scans for robot 'ghost'.*mapper/lidar"):
+        McapScanLog(path, robot="ghost")
+
+
+def test_offline_slam_maps_a_recording(recording, tmp_path):
+    path, _, _ = recording
+    res = run_offline(path, tmp_path / "slam")
+    assert res.n_scans == 31
+    traj = np.loadtxt(res.trajectory_path)
+    assert traj.shape == (31, 4) and traj[-1, 0] == pytest.approx(3.0)
+    assert res.map_png_path.stat().st_size > 0
+
+
+def test_interpolate_poses_wraps_the_heading():
+    t = np.array([0.0, 1.0])
+    poses = np.array([[0.0, 0.0, 3.0], [1.0, 2.0, -3.0]])
+    got = interpolate_poses(np.array([0.5, -1.0, 2.0]), t, poses)
+    # half-way from 3.0 rad to -3.0 rad the short way round is pi exactly
+    np.testing.assert_allclose(got[0], [0.5, 1.0, np.pi], atol=1e-12)
+    np.testing.assert_allclose(got[1:], poses, atol=1e-12)  # clamped at both ends
+
+
+def test_slam_package_never_imports_the_simulator():
+    code = (
+        "import sys, agvsim.slam.offline, agvsim.slam.recording\n"
+        "print(sorted(m for m in sys.modules if m.startswith(('agvsim.sim', 'agvsim.scenario'))))"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert res.stdout.strip() == "[]"
+
+
+def test_online_slam_map_is_recorded_at_the_end_of_a_run(tmp_path):
+    from PIL import Image
+
+    from agvsim.record.mcap_reader import Recording
+    from agvsim.runner import run_scenario
+
+    data = {**SCENARIO, "duration_s": 3.0}
+    data["robots"] = [dict(r) for r in SCENARIO["robots"]]
+    data["robots"][1]["slam"] = {"sensor": "lidar"}
+    run_scenario(parse_scenario(data, "slam room"), tmp_path, plot=False)
+    (grid,) = Recording(tmp_path / "run.mcap").occupancy("/mapper/slam/map")
+    assert grid.t_s == pytest.approx(3.0) and grid.resolution_m == pytest.approx(0.05)
+    # the same map as the run's map_server picture (row 0 north; occupied 0, free 254)
+    pgm = np.asarray(Image.open(tmp_path / "slam_mapper" / "map.pgm"))
+    cells = grid.cells[::-1]
+    assert cells.shape == pgm.shape
+    unsure = cells[pgm == 205]  # never seen (-1) or between the picture's thresholds
+    assert np.all((unsure == -1) | ((unsure >= 19) & (unsure <= 65))) and np.any(unsure == -1)
+    assert np.all(cells[pgm == 0] >= 65) and np.all(
+        (cells[pgm == 254] >= 0) & (cells[pgm == 254] <= 20)
+    )
+    assert (pgm == 0).sum() > 50  # walls were seen

@@ -1,0 +1,100 @@
+"""``agvsim replay`` in a real headless Chromium (Playwright): the page draws the recorded
+scene, and Play / Pause drive the playback.
+
+Skipped without Debian's chromium, unless AGVSIM_REQUIRE_BROWSER=1 (as tests/test_app_browser).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agvsim.bench_app import FLAGS, free_port
+
+CHROMIUM = "/usr/bin/chromium"
+ROOM = {
+    "name": "replay room",
+    "world": {"picture": "#########\n#.......#\n#.......#\n#.......#\n#########"},
+    "robots": [
+        {
+            "name": "agv",
+            "model": "differential",
+            "color": "#ff0000",
+            "body": {"length_m": 1.2, "width_m": 0.9},
+            "pose": {"x_m": -2.5, "y_m": 0.0},
+            "sensors": [{"type": "lidar", "beams": 16, "rate_hz": 10}],
+            "controller": {"type": "script", "steps": [{"duration_s": 9, "twist": [0.4, 0.0]}]},
+        }
+    ],
+}
+
+
+def _need_browser() -> None:
+    missing = []
+    if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
+        missing.append("Debian's chromium")
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        missing.append("playwright")
+    if missing:
+        why = "browser tests need " + " and ".join(missing)
+        if os.environ.get("AGVSIM_REQUIRE_BROWSER") == "1":
+            pytest.fail(why)
+        pytest.skip(why)
+
+
+def _wait(cond, timeout_s: float = 15.0, what: str = "condition") -> None:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        if cond():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_replay_page_plays_the_recording(tmp_path):
+    _need_browser()
+    from PIL import Image
+    from playwright.sync_api import sync_playwright
+
+    from agvsim.app.replay import ReplayApp, ReplaySession
+    from agvsim.runner import run_scenario
+    from agvsim.scenario import parse_scenario
+
+    run_scenario(parse_scenario({**ROOM, "duration_s": 4.0}, "room"), tmp_path, plot=False)
+    session = ReplaySession(tmp_path / "run.mcap")
+    app = ReplayApp(session, port=free_port()).start()
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(f"http://127.0.0.1:{app.port}/")
+            page.get_by_role("button", name="Play").wait_for(timeout=30000)
+            page.get_by_role("button", name="Top view").click()
+            page.wait_for_timeout(1500)
+            canvas = page.locator("canvas").first
+            img = np.asarray(Image.open(io.BytesIO(canvas.screenshot())).convert("RGB"))
+            red = (img[..., 0] > 180) & (img[..., 1] < 90) & (img[..., 2] < 90)
+            assert red.sum() > 30, "the red robot is not drawn"
+            page.get_by_role("button", name="Play").click()
+            _wait(lambda: session.t_s > 0.5, what="playback to advance")
+            page.get_by_role("button", name="Pause").click()
+            _wait(lambda: not session.playing, what="pause")
+            t = session.t_s
+            page.wait_for_timeout(400)
+            assert session.t_s == t  # paused
+            k = int(np.searchsorted(session.times, t + 1e-9, side="right")) - 1
+            np.testing.assert_allclose(session.sim.state.poses, session.poses[k], atol=0)
+            browser.close()
+        assert errors == []
+    finally:
+        app.stop()
