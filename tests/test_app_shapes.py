@@ -147,3 +147,56 @@ def test_views_frame_the_map_and_follow_the_robot():
     assert cam.position[:2] == cam.look_at[:2] == (0.0, 0.0)
     c = shapes.camera_chase(np.array([1.0, 2.0, np.pi / 2]))
     assert c.position[1] < 2.0 < c.look_at[1] and c.position[0] == pytest.approx(1.0)
+
+
+def test_markers_sit_on_their_wall_face_the_right_way_round():
+    from agvsim.world.markers import Face, MarkerKind, MarkerSpec, place_marker
+
+    m = np.zeros((5, 5), dtype=int)
+    m[0, :] = m[-1, :] = m[:, 0] = m[:, -1] = 1
+    g = OccupancyGrid.from_matrix(m, 1.0, (0.0, 0.0))  # free x, y in [1, 4]
+    # ArUco 4x4 (6 modules with its border, + 1 quiet module each side: 8) of size 0.4 m:
+    # printed square 0.4 * 8 / 6 = 0.5333 m, half 0.26667; on the west face of the east wall
+    # cell (row 2, col 4): the face line x = 4, the cell's middle y = 2.5; seen from the front
+    # (looking east) right is south (-y)
+    aruco = place_marker(
+        MarkerSpec(MarkerKind.ARUCO, Face.WEST, 0.4, 0.5, cell=(2, 4), marker_id=3), g, 1.0
+    )
+    h = 0.4 * 8 / 6 / 2
+    want = [
+        (3.99, 2.5 + h, 0.5 + h),  # top-left: north, up
+        (3.99, 2.5 - h, 0.5 + h),
+        (3.99, 2.5 - h, 0.5 - h),
+        (3.99, 2.5 + h, 0.5 - h),
+    ]
+    assert shapes.marker_quad(aruco, 0.01) == pytest.approx(np.array(want), abs=1e-12)
+    # a 0.3 m patch on the north face of the south wall cell (row 4, col 2), 0.2 m to the right
+    # (looking south, right is west): centre x = 2.5 - 0.2, face y = 1, 1 cm out: y = 1.01
+    patch = place_marker(
+        MarkerSpec(MarkerKind.PATCH, Face.NORTH, 0.3, 0.5, cell=(4, 2), offset_m=0.2), g, 1.0
+    )
+    want = [(2.45, 1.01, 0.65), (2.15, 1.01, 0.65), (2.15, 1.01, 0.35), (2.45, 1.01, 0.35)]
+    assert shapes.marker_quad(patch, 0.01) == pytest.approx(np.array(want), abs=1e-12)
+    for mk in (aruco, patch):
+        # the image node's corners (column 0 left, row 0 top) land on the printed square, its
+        # z points into the wall (the viewer reads it looking along +z)
+        pos, q = shapes.marker_pose(mk, 0.01)
+        assert np.linalg.norm(q) == pytest.approx(1.0)
+        local = shapes.image_corners_local(mk.extent_m, mk.extent_m)
+        placed = np.array([pos + shapes.rotate(q, c) for c in local])
+        assert placed == pytest.approx(shapes.marker_quad(mk, 0.01), abs=1e-12)
+        nx, ny = mk.normal_xy
+        assert shapes.rotate(q, [0.0, 0.0, 1.0]) == pytest.approx([-nx, -ny, 0.0], abs=1e-12)
+        img = shapes.marker_image(mk, 128)
+        k = img.shape[0] // mk.texture.shape[0]
+        assert img.shape[0] >= 128 and img.shape[:2] == (k * mk.texture.shape[0],) * 2
+        assert np.array_equal(img[::k, ::k], mk.texture)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.5, 2.0, np.pi, -2.5])
+@pytest.mark.parametrize("tilt", [0.0, 1.0, np.pi / 2, 3.0])
+def test_rotation_matrices_become_the_same_quaternions(yaw, tilt):
+    q = shapes.quat_mul(shapes.quat_z(yaw), [np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0])
+    r = np.column_stack([shapes.rotate(q, e) for e in np.eye(3)])
+    got = shapes._quat_of(r)
+    assert got == pytest.approx(q * np.sign(q @ got), abs=1e-12)

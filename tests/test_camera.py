@@ -251,6 +251,50 @@ def test_same_seed_same_frames():
     assert frames() == frames()
 
 
+# ---------------------------------------------------------------------------- pixel noise
+def _steps(data: dict, n: int = 12) -> Simulation:
+    sim = build(parse_scenario(data))
+    for _ in range(n):
+        sim.step()
+    return sim
+
+
+def test_camera_noise_zero_draws_nothing_and_leaves_the_frames_exact():
+    sim = _steps(_scenario({"type": "camera", "noise_std": 0}))
+    assert sim.state.image_seq[0] == 3  # 0.24 s at 10 Hz: frames at t = 0, 0.1 and 0.2
+    pose = sim.state.image_pose[0]
+    clean, _ = sim.cameras.render(0, pose, sim.footprints(pose[None]))
+    assert np.array_equal(sim.state.images[0], clean)
+    # the generator is where a run without a camera leaves it: odometry noise alone used it
+    blind = _scenario()
+    blind["robots"][0]["sensors"] = []
+    assert sim.rng.bit_generator.state == _steps(blind).rng.bit_generator.state
+
+
+def test_camera_noise_is_gaussian_with_the_given_std_and_repeats_with_the_seed():
+    std = 8.0
+    sim = _steps(_scenario({"type": "camera", "noise_std": std}))
+    pose = sim.state.image_pose[0]
+    clean, _ = sim.cameras.render(0, pose, sim.footprints(pose[None]))
+    noisy = np.asarray(sim.state.images[0])
+    diff = noisy.astype(np.int64) - clean.astype(np.int64)
+    # only values 5 std away from 0 and 255 (walls 131..185, floor 209..225): nothing clipped
+    keep = (clean >= 5 * std) & (clean <= 255 - 5 * std)
+    assert keep.mean() > 0.5
+    d = diff[keep]
+    # E|N(0, s)| = s sqrt(2 / pi) = 6.383 for s = 8 (rounding to integers adds ~0.004)
+    assert np.abs(d).mean() == pytest.approx(std * math.sqrt(2 / math.pi), rel=0.02)
+    assert d.mean() == pytest.approx(0.0, abs=0.1)
+    assert d.std() == pytest.approx(std, rel=0.02)
+    assert noisy.dtype == np.uint8 and not noisy.flags.writeable
+    # same scenario and seed: the same noisy frames, bit for bit; another seed: other noise
+    again = _steps(_scenario({"type": "camera", "noise_std": std}))
+    assert np.array_equal(again.state.images[0], noisy)
+    other = _scenario({"type": "camera", "noise_std": std})
+    other["seed"] = 1
+    assert not np.array_equal(_steps(other).state.images[0], noisy)
+
+
 # ---------------------------------------------------------------------------- scenario
 def _scenario(sensor: dict | None = None, **world) -> dict:
     return {
@@ -285,6 +329,8 @@ def test_scenario_camera_defaults_sit_on_the_front_of_the_body():
         ({"type": "camera", "hfov_deg": 200}, "robots[0].sensors[0].camera.hfov_deg", ["170"]),
         ({"type": "camera", "widht_px": 64}, "robots[0].sensors[0].camera", ["width_px"]),
         ({"type": "camra"}, "robots[0].sensors[0]", ["'camera'"]),
+        ({"type": "camera", "noise_std": -1}, "sensors[0].camera.noise_std", ["0", "-1"]),
+        ({"type": "camera", "noise_std": 300}, "sensors[0].camera.noise_std", ["255", "300"]),
     ],
 )
 def test_bad_camera_settings_are_refused_with_the_field(sensor, where, words):

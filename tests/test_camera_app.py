@@ -45,3 +45,19 @@ def test_the_picked_robots_camera_frame_is_shown_and_follows_new_frames(app):
     panel._select("blind")
     panel.refresh()
     assert panel.camera_view is None
+
+
+def test_the_3d_view_draws_every_marker_on_its_wall(app):
+    from agvsim.app import shapes
+
+    app.scene.update()
+    markers = app.session.sim.world.appearance.markers
+    assert len(markers) == 6 and len(app.scene._markers) == 6
+    for node, mk in zip(app.scene._markers, markers, strict=True):
+        pos, q = shapes.marker_pose(mk)
+        assert np.asarray(node.position) == pytest.approx(pos, abs=1e-6)
+        assert np.asarray(node.wxyz) == pytest.approx(q, abs=1e-6)
+    # a new world (here the same maze edited) redraws them once, not twice
+    app.session.toggle_cell(1, 1)
+    app.scene.update()
+    assert len(app.scene._markers) == 6

@@ -79,6 +79,38 @@ def test_tf_bytes_equal_rosbags_for_every_string_padding(frame):
     assert ours == bytes(TS.serialize_cdr(ref, R.TF_MESSAGE))
 
 
+def test_3d_tf_bytes_equal_rosbags_and_yaw_pitch_quaternions_compose():
+    from scipy.spatial.transform import Rotation
+
+    t = 1_500_000_000
+    q = R.yaw_pitch_quaternion(0.7, -0.3)
+    want = Rotation.from_euler("ZY", [0.7, -0.3]).as_quat()  # intrinsic: yaw, then pitch
+    assert q == pytest.approx(tuple(want), abs=1e-12)
+    tfs = [("a/base_link", "a/cam", (0.3, -0.1, 0.45), q), ("a/cam", "a/cam_optical", (0.0,) * 3,
+           R.OPTICAL_QUATERNION)]  # fmt: skip
+    ours = R.encode_tf_3d(t, tfs)
+    ts_ = T["geometry_msgs/msg/TransformStamped"]
+    tr = T["geometry_msgs/msg/Transform"]
+    v3, qt = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    ref = T["tf2_msgs/msg/TFMessage"](
+        transforms=[
+            ts_(
+                header=_hdr(t, parent),
+                child_frame_id=child,
+                transform=tr(
+                    translation=v3(x=p[0], y=p[1], z=p[2]),
+                    rotation=qt(x=r[0], y=r[1], z=r[2], w=r[3]),
+                ),
+            )
+            for parent, child, p, r in tfs
+        ]
+    )
+    assert ours == bytes(TS.serialize_cdr(ref, R.TF_MESSAGE))
+    # the optical frame: z along the camera's x (forward), x along -y (right), y along -z
+    m = Rotation.from_quat(R.OPTICAL_QUATERNION).as_matrix()
+    assert m == pytest.approx(np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]]), abs=1e-12)
+
+
 @pytest.mark.parametrize("n", [0, 1, 4, 240])
 def test_laser_scan_bytes_equal_rosbags(n):
     ranges = np.linspace(0.2, 9.0, n).astype(np.float32)

@@ -404,13 +404,83 @@ def test_camera_frames_are_recorded_as_jpeg(tmp_path):
     images = msgs["/a/cam/image/compressed"]
     assert len(images) == 11  # 10 Hz over 1 s, t = 0 included
     last = images[-1][1]
-    assert last.format == "jpeg" and last.header.frame_id == "a/cam"
+    assert last.format == "jpeg" and last.header.frame_id == "a/cam_optical"
     assert _stamp(last) == pytest.approx(sim.camera_frames()[0].stamp_s)
     back = np.asarray(Image.open(io.BytesIO(bytes(last.data))).convert("RGB"), dtype=int)
     assert back.shape == (24, 32, 3)
     assert np.abs(back - sim.camera_frames()[0].rgb.astype(int)).mean() < 12.0
     ((_, static),) = msgs["/tf_static"]
-    assert "a/cam" in {t.child_frame_id for t in static.transforms}
+    assert {"a/cam", "a/cam_optical"} <= {t.child_frame_id for t in static.transforms}
+
+
+def _matrix(q) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+
+
+def test_a_pitched_camera_mount_is_a_3d_transform_with_an_optical_child(tmp_path):
+    from agvsim.sensors.camera import project_points
+
+    data = json.loads(json.dumps(ROOM))
+    data["robots"] = data["robots"][:1]
+    data["robots"][0]["sensors"] = [
+        {
+            "type": "camera",
+            "name": "cam",
+            "width_px": 32,
+            "height_px": 24,
+            "mount_x_m": 0.3,
+            "mount_y_m": -0.1,
+            "mount_z_m": 0.45,
+            "mount_yaw_deg": 90,
+            "pitch_deg": 30,
+        }
+    ]
+    sim = build(parse_scenario(data, "room"))
+    Recorder(tmp_path / "cam.mcap", sim).close()
+    ((_, static),) = _read(tmp_path / "cam.mcap")["/tf_static"]
+    tr = {t.child_frame_id: t for t in static.transforms}
+    assert set(tr) == {"a/cam", "a/cam_optical"}
+    cam, opt = tr["a/cam"], tr["a/cam_optical"]
+    assert cam.header.frame_id == "a/base_link" and opt.header.frame_id == "a/cam"
+    t = cam.transform.translation
+    assert (t.x, t.y, t.z) == pytest.approx((0.3, -0.1, 0.45), abs=1e-12)
+    # q = q_z(90 deg) q_y(30 deg): (w, x, y, z) = (c45 c15, -s45 s15, c45 s15, s45 c15)
+    #   = (0.683013, -0.183013, 0.183013, 0.683013)
+    q = cam.transform.rotation
+    want = (-0.183013, 0.183013, 0.683013, 0.683013)
+    assert (q.x, q.y, q.z, q.w) == pytest.approx(want, abs=1e-6)
+    t = opt.transform.translation
+    assert (t.x, t.y, t.z) == (0.0, 0.0, 0.0)
+    q = opt.transform.rotation
+    assert (q.x, q.y, q.z, q.w) == (-0.5, 0.5, -0.5, 0.5)
+    # the camera's axes in base_link: x forward = (cos 30 cos 90, cos 30 sin 90, -sin 30);
+    # the optical frame: z along it, x right (yawed 90 deg: base +x), y down
+    r_cam = _matrix(cam.transform.rotation)
+    r_opt = r_cam @ _matrix(opt.transform.rotation)
+    assert r_cam[:, 0] == pytest.approx((0.0, np.sqrt(3) / 2, -0.5), abs=1e-12)
+    assert r_opt[:, 2] == pytest.approx((0.0, np.sqrt(3) / 2, -0.5), abs=1e-12)
+    assert r_opt[:, 0] == pytest.approx((1.0, 0.0, 0.0), abs=1e-12)
+    assert r_opt[:, 1] == pytest.approx((0.0, -0.5, -np.sqrt(3) / 2), abs=1e-12)
+    # base_link -> optical frame and the camera matrix K give the simulator's own pixels
+    spec = sim.robots[0].cameras[0]
+    x0, y0, th = sim.state.poses[0]
+    rng = np.random.default_rng(0)
+    pts_base = np.column_stack(
+        [rng.uniform(-1, 1, 20) + 0.3, rng.uniform(1, 3, 20), rng.uniform(-0.5, 0.2, 20)]
+    )
+    c, s = np.cos(th), np.sin(th)
+    pts_world = np.column_stack(
+        [x0 + c * pts_base[:, 0] - s * pts_base[:, 1], y0 + s * pts_base[:, 0] + c * pts_base[:, 1],
+         pts_base[:, 2]]
+    )  # fmt: skip
+    p_opt = (pts_base - (0.3, -0.1, 0.45)) @ r_opt  # R^T (p - t), row by row
+    uv = (p_opt @ spec.K.T)[:, :2] / p_opt[:, 2:3]
+    want, depth = project_points(spec, sim.state.poses[0], pts_world)
+    assert np.all(depth > 0)
+    assert uv == pytest.approx(want, abs=1e-9)
+    assert p_opt[:, 2] == pytest.approx(depth, abs=1e-12)
 
 
 def test_occupancy_hook_checks_its_input(tmp_path):

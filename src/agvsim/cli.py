@@ -53,8 +53,12 @@ def serve(
     ] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="Port of the app.")] = 8080,
     play: Annotated[bool, typer.Option("--play", help="Start running at once.")] = False,
+    out_dir: Annotated[
+        Path, typer.Option("--out", help="Output folder of the app's videos (video_1, ...).")
+    ] = Path("runs/app"),
 ) -> None:
-    """Open the browser app: 3D view, the robot mask, run controls, maze editor, plots."""
+    """Open the browser app: 3D view, the robot mask, run controls, video, maze editor,
+    plots."""
     from agvsim.scenario import ScenarioError
 
     try:
@@ -72,7 +76,15 @@ def serve(
             )
 
     try:
-        serve_app(scenario, host=host, port=port, play=play, on_ready=ready)
+        serve_app(
+            scenario,
+            host=host,
+            port=port,
+            play=play,
+            on_ready=ready,
+            out_dir=out_dir,
+            notify=lambda m: out.print(m, markup=False, highlight=False),
+        )
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None

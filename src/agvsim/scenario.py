@@ -205,6 +205,7 @@ def _camera(sc: CameraConfig, rc: RobotConfig, model: Any, offset: float) -> Cam
         mount_yaw_rad=float(np.deg2rad(sc.mount_yaw_deg)),
         pitch_rad=float(np.deg2rad(sc.pitch_deg)),
         range_max_m=sc.range_max_m,
+        noise_std=sc.noise_std,
     )
 
 

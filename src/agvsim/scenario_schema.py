@@ -192,6 +192,9 @@ class CameraConfig(_Strict):
     mount_z_m: float | None = Field(None, gt=0, description="default: 5 cm above the body")
     mount_yaw_deg: float = 0.0
     pitch_deg: float = Field(0.0, ge=-80, le=80, description="positive: looking down")
+    noise_std: float = Field(
+        0.0, ge=0, le=255, description="Gaussian pixel noise, std in 0..255 levels; 0 = off"
+    )
 
 
 SensorConfig = Annotated[RangersConfig | LidarConfig | CameraConfig, Field(discriminator="type")]

@@ -1,11 +1,14 @@
-"""The side panel of the browser app: run controls, the robot mask, the maze editor, views,
-live numbers and plots. Every widget calls into the ``Session``; nothing a browser sends is
-run as code (scenario and map files are parsed as data, python controllers are refused)."""
+"""The side panel of the browser app: run controls, video recording, the robot mask, the maze
+editor, views, live numbers and plots. Every widget calls into the ``Session``; nothing a
+browser sends is run as code (scenario and map files are parsed as data, python controllers are
+refused)."""
 
 from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -41,8 +44,16 @@ class Panel:
     """Builds the GUI and keeps it in step with the session (``refresh()`` a few times a
     second)."""
 
-    def __init__(self, server: viser.ViserServer, session: Session, scene: Any):
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        session: Session,
+        scene: Any,
+        notify: Callable[[str], None] = print,
+    ):
         self.server, self.session, self.scene = server, session, scene
+        self.notify = notify  # messages for the console (where videos were saved)
+        self._video_saved = ""
         self.selected = session.robot_names()[0]
         self._overlay_due = 0.0
         self.view_of: dict[int, str] = {}  # client id -> view
@@ -117,6 +128,18 @@ class Panel:
                 lambda: s.set_keyboard(self.selected if self.keyboard.value else None)
             )
         )
+        self.record_video = gui.add_button(
+            "Record video",
+            icon=viser.Icon.PLAYER_RECORD,
+            hint=f"MP4s of the top view and of each onboard camera, 25 frames per simulated "
+            f"second, into a new folder {s.out_dir}/video_<k>",
+        )
+        self.record_video.on_click(lambda _: self._do(self.start_video))
+        self.save_video = gui.add_button(
+            "Stop & save video", icon=viser.Icon.PLAYER_STOP, disabled=True
+        )
+        self.save_video.on_click(lambda _: self._do(self.stop_video))
+        self.video_msg = gui.add_markdown("")
         self.run_msg = gui.add_markdown("")
 
     def _build_robots(self) -> None:
@@ -171,6 +194,46 @@ class Panel:
             where.content = _error_md("\n".join(err.problems))
         except (EditError, MaskError, ValueError) as err:
             where.content = _error_md(str(err))
+
+    # ------------------------------------------------------------------ video
+    def start_video(self) -> Path:
+        folder = self.session.start_video()
+        self._video_saved = ""
+        self.notify(f"recording video into {folder}")
+        self._refresh_video()
+        return folder
+
+    def stop_video(self) -> list[Path]:
+        status = self.session.video_status()
+        paths = self.session.stop_video()
+        if paths and status is not None:
+            _, frames, secs = status
+            names = ", ".join(p.name for p in paths)
+            self._video_saved = (
+                f"&#10004; saved {secs:.1f} s ({frames} frames): `{paths[0].parent}/` {names}"
+            )
+            self.notify(f"video saved ({secs:.1f} s): " + ", ".join(str(p) for p in paths))
+        self._refresh_video()
+        return paths
+
+    def _refresh_video(self) -> None:
+        """The record / save buttons and the progress: seconds and frames written so far."""
+        status = self.session.video_status()
+        recording = status is not None
+        if self.record_video.disabled != recording:
+            self.record_video.disabled = recording
+            self.save_video.disabled = not recording
+        if status is not None:
+            folder, frames, secs = status
+            text = (
+                f"<span style='color:#c0392b'>&#9679;</span> recording **{secs:.1f} s** "
+                f"({frames} frames) into `{folder}/`"
+            )
+        else:
+            error = self.session.video_error
+            text = _error_md(error) if error else self._video_saved
+        if self.video_msg.content != text:
+            self.video_msg.content = text
 
     def _key(self, name: str) -> None:
         if self.session.keyboard_robot is None:
@@ -382,6 +445,7 @@ class Panel:
         if self.speed.value != s.speed_label:
             self.speed.value = s.speed_label
         self.status.content = status + (("<br/>" + _error_md(error)) if error else "")
+        self._refresh_video()
         self._refresh_numbers()
         self._refresh_camera()
 

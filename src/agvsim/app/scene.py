@@ -4,7 +4,8 @@ One ``SceneView`` keeps the viewer in step with a ``Session``: the floor and the
 merged mesh, rebuilt only when the maze changes), each robot as its model (body, wheels at
 their real positions turning with their rotation and steering angles, Mecanum rollers), the
 sensor beams in the thesis's colours (green rangers, blue lidar) with their hit points, trails,
-and an optional map overlay.
+the world's vision markers (ArUco, AprilTag, QR codes, colour patches) on their wall faces, and
+an optional map overlay.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import viser
 from agvsim.app import shapes
 from agvsim.app.session import Session
 from agvsim.world.grid import OccupancyGrid
+from agvsim.world.markers import Marker
 
 RANGER_RGB = (40, 200, 60)
 LIDAR_RGB = (40, 110, 235)
@@ -57,6 +59,7 @@ class SceneView:
         self._hits: Any = None
         self._trails: Any = None
         self._overlay_node: Any = None
+        self._markers: list[Any] = []
         self._frame = 0
         self.frames_sent = 0
         server.scene.set_up_direction("+z")
@@ -64,7 +67,7 @@ class SceneView:
         server.scene.add_light_directional("/light/sun", intensity=1.5, wxyz=(0.92, 0.2, -0.3, 0.1))
 
     # ------------------------------------------------------------------ building
-    def _build_world(self, grid: OccupancyGrid) -> None:
+    def _build_world(self, grid: OccupancyGrid, markers: tuple[Marker, ...] = ()) -> None:
         sc = self.server.scene
         xmin, xmax, ymin, ymax = grid.extent_m
         w, h = xmax - xmin, ymax - ymin
@@ -92,7 +95,30 @@ class SceneView:
             )
         else:
             sc.add_frame("/walls", show_axes=False)  # replaces an old mesh
+        self._draw_markers(markers)
         self._draw_overlay()
+
+    def _draw_markers(self, markers: tuple[Marker, ...]) -> None:
+        """Each marker as an image (its texture, quiet zone included) just in front of its
+        wall face, unlit, so it shows its printed colours."""
+        for node in self._markers:
+            node.remove()
+        self._markers = []
+        for k, mk in enumerate(markers):
+            position, wxyz = shapes.marker_pose(mk)
+            self._markers.append(
+                self.server.scene.add_image(
+                    f"/markers/m{k}",
+                    shapes.marker_image(mk),
+                    render_width=mk.extent_m,
+                    render_height=mk.extent_m,
+                    format="png",
+                    position=tuple(position),
+                    wxyz=tuple(wxyz),
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+            )
 
     def _build_robots(self) -> None:
         sc = self.server.scene
@@ -212,12 +238,13 @@ class SceneView:
             scans = st.scans.copy()
             table = sim.sensors
             grid = sim.world.grid
+            markers = sim.world.appearance.markers
             trails = [np.array(h.trail) for h in s.history.values()] if self.show_trails else []
             kinds = _sensor_kinds(s.config, table)
         with self.server.atomic():
             if world != self._world or layout != self._layout:
                 if world != self._world:
-                    self._build_world(grid)
+                    self._build_world(grid, markers)
                     self._world = world
                 if layout != self._layout:
                     self._build_robots()

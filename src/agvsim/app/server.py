@@ -9,13 +9,15 @@ audience; the simulation never waits for a browser.
 from __future__ import annotations
 
 import logging
+import signal
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from agvsim.app.session import Session
+from agvsim.app.session import DEFAULT_OUT, Session
 from agvsim.scenario import Scenario, load_scenario
 
 log = logging.getLogger("agvsim.app")
@@ -40,17 +42,18 @@ class App:
         port: int = 8080,
         fps: float = 40.0,
         verbose: bool = False,
+        notify: Callable[[str], None] = print,
     ):
         import viser
 
         from agvsim.app.panel import Panel
         from agvsim.app.scene import SceneView
 
-        self.session, self.fps = session, fps
+        self.session, self.fps, self.notify = session, fps, notify
         self.server = viser.ViserServer(host=host, port=port, verbose=verbose)
         self.server.gui.set_panel_label("agvsim")
         self.scene = SceneView(self.server, session)
-        self.panel = Panel(self.server, session, self.scene)
+        self.panel = Panel(self.server, session, self.scene, notify)
         self.stats = AppStats()
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -122,9 +125,16 @@ class App:
         return self
 
     def stop(self) -> None:
+        """End the loops, finish a video being recorded (nothing recorded is lost), close
+        the server."""
         self._stop.set()
         for t in self._threads:
             t.join(timeout=2.0)
+        status = self.session.video_status()
+        paths = self.session.stop_video()
+        if paths and status is not None:
+            saved = ", ".join(str(p) for p in paths)
+            self.notify(f"video saved ({status[2]:.1f} s): {saved}")
         self.server.stop()
 
     def frame_rate(self, window_s: float = 2.0) -> float:
@@ -135,13 +145,15 @@ class App:
         return len(recent) / window_s
 
 
-def open_session(scenario: str | Path | Scenario | None) -> Session:
+def open_session(
+    scenario: str | Path | Scenario | None, out_dir: str | Path = DEFAULT_OUT
+) -> Session:
     if scenario is None:
         from agvsim.scenario import parse_scenario
 
         default = Path(__file__).resolve().parents[3] / "scenarios" / "thesis_maze_avoid.yaml"
         if default.is_file():
-            return Session(load_scenario(default), str(default))
+            return Session(load_scenario(default), str(default), out_dir=out_dir)
         sc = parse_scenario(
             {
                 "name": "thesis maze",
@@ -156,10 +168,10 @@ def open_session(scenario: str | Path | Scenario | None) -> Session:
                 ],
             }
         )
-        return Session(sc, "built-in scenario")
+        return Session(sc, "built-in scenario", out_dir=out_dir)
     if isinstance(scenario, Scenario):
-        return Session(scenario)
-    return Session(load_scenario(scenario), str(scenario))
+        return Session(scenario, out_dir=out_dir)
+    return Session(load_scenario(scenario), str(scenario), out_dir=out_dir)
 
 
 def serve(
@@ -168,13 +180,16 @@ def serve(
     port: int = 8080,
     play: bool = False,
     on_ready: Callable[[App], None] | None = None,
+    out_dir: str | Path = DEFAULT_OUT,
+    notify: Callable[[str], None] = print,
 ) -> None:
-    """Run the app until Ctrl-C."""
-    app = App(open_session(scenario), host=host, port=port).start()
+    """Run the app until Ctrl-C (or SIGTERM); a video being recorded is finished first."""
+    app = App(open_session(scenario, out_dir), host=host, port=port, notify=notify).start()
     if play:
         app.session.play()
     if on_ready is not None:
         on_ready(app)
+    previous = _stop_on_sigterm()
     try:
         while True:
             time.sleep(0.5)
@@ -182,3 +197,18 @@ def serve(
         pass
     finally:
         app.stop()
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _stop_on_sigterm() -> Any:
+    """Make SIGTERM (``kill``, a service manager) stop the app like Ctrl-C, so that a video
+    being recorded is closed; returns the previous handler (None off the main thread)."""
+
+    def stop(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        return signal.signal(signal.SIGTERM, stop)
+    except ValueError:  # not the main thread: leave the signals alone
+        return None

@@ -10,6 +10,10 @@ Editing a robot ("apply" in the mask) rebuilds the simulation from the edited sc
 carries over the live state of every *other* robot (pose, odometry, wheel angles, counters) and
 the clock; the edited robot restarts at the pose given in the mask. Editing the maze changes
 the live simulation in place.
+
+"Record video" (``start_video``) writes ``top.mp4`` and one MP4 per onboard camera, as
+``agvsim run --video`` does, into a new folder ``<out_dir>/video_<k>``, a frame every 1/25 s of
+*simulated* time from the step loop (paused: no frames); ``stop_video`` finishes the files.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -31,6 +35,11 @@ from agvsim.sim.engine import ControllerError, Simulation
 from agvsim.world import loaders, mazes
 from agvsim.world.grid import OccupancyGrid
 
+if TYPE_CHECKING:
+    from agvsim.viz.video import VideoRecorder
+
+#: where "Record video" writes by default (``agvsim serve --out``)
+DEFAULT_OUT = Path("runs/app")
 #: run speeds offered by the app: label -> simulated seconds per wall-clock second
 SPEEDS: dict[str, float | None] = {"real time": 1.0, "x2": 2.0, "x10": 10.0, "max": None}
 #: seconds of history kept for the live plots, and samples of trail kept per robot
@@ -58,8 +67,15 @@ class Session:
     """A scenario being run and edited. ``layout`` increases whenever the set of robots, their
     build or the world changes, so a viewer knows when to rebuild its scene."""
 
-    def __init__(self, scenario: Scenario, source: str = "scenario", allow_python: bool = True):
+    def __init__(
+        self,
+        scenario: Scenario,
+        source: str = "scenario",
+        allow_python: bool = True,
+        out_dir: str | Path = DEFAULT_OUT,
+    ):
         self.source = source
+        self.out_dir = Path(out_dir)  # where "Record video" puts its folders
         self.base_dir = scenario._base_dir
         self.allow_python = allow_python
         self.config: dict[str, Any] = scenario.model_dump(mode="json", exclude_unset=True)
@@ -86,6 +102,8 @@ class Session:
         self.sim: Simulation = self._build(self.config)
         self._slams: dict[str, Any] = {}
         self._slam_sim: Simulation | None = None
+        self.video: VideoRecorder | None = None  # while recording
+        self.video_error: str | None = None
         self._reset_history()
 
     # ------------------------------------------------------------------ building
@@ -184,7 +202,59 @@ class Session:
             return False
         self._slam_update()
         self._sample()
+        if self.video is not None:
+            self._record_video()
         return True
+
+    # ------------------------------------------------------------------ video
+    def start_video(self, fps: float = 25.0, width_px: int = 720) -> Path:
+        """Start recording MP4s of the run (top view, each onboard camera) into a new folder
+        ``<out_dir>/video_<k>``; returns the folder. Refused while recording."""
+        from agvsim.viz.video import VideoRecorder
+
+        with self.lock:
+            if self.video is not None:
+                raise EditError(f"already recording into {self.video.out}; stop it first")
+            k = 1
+            while (self.out_dir / f"video_{k}").exists():
+                k += 1
+            folder = self.out_dir / f"video_{k}"
+            try:
+                self.video = VideoRecorder(self.sim, folder, fps=fps, width_px=width_px)
+            except (OSError, RuntimeError) as err:
+                raise EditError(f"cannot record video into {folder}: {err}") from None
+            self.video_error = None
+            return folder
+
+    def stop_video(self) -> list[Path]:
+        """Finish the video files (the frames still due are written first); returns their
+        paths (empty when not recording)."""
+        with self.lock:
+            video, self.video = self.video, None
+            if video is None:
+                return []
+            try:
+                video.close()
+            except (OSError, RuntimeError, ValueError) as err:
+                self.video_error = f"video: {err}"
+            return video.paths
+
+    def video_status(self) -> tuple[Path, int, float] | None:
+        """(folder, frames written, seconds of video) while recording, else None."""
+        with self.lock:
+            v = self.video
+            return None if v is None else (v.out, v.frames, v.seconds)
+
+    def _record_video(self) -> None:
+        video = self.video
+        if video is None:
+            return
+        try:
+            video.follow(self.sim)  # a rebuilt simulation (edit, reset) carries on
+            video.record()
+        except (OSError, RuntimeError, ValueError) as err:  # e.g. a full disk, ffmpeg gone
+            self.stop_video()
+            self.video_error = f"video stopped: {err}"
 
     # ------------------------------------------------------------------ online SLAM
     def _slam_update(self) -> None:

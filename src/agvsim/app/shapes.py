@@ -7,6 +7,8 @@
   robot, from its kinematic model's own wheel positions.
 - ``wheel_quaternions``: each wheel's orientation from its steering angle and rotation angle.
 - ``beam_segments``: the rays of every sensor from the mount to the hit (or the range limit).
+- ``marker_quad``, ``marker_pose``, ``marker_image``: a vision marker on its wall face, as the
+  corners of its printed square, the pose of the image that shows it and that image.
 - ``camera_*``: viewpoints (panoramic, top plan, chase behind a robot).
 
 World frame: x east, y north, z up, metres; quaternions are (w, x, y, z).
@@ -21,9 +23,11 @@ import numpy as np
 from agvsim.sim.spec import RobotSpec
 from agvsim.sim.state import SensorTable
 from agvsim.world.grid import OccupancyGrid
+from agvsim.world.markers import Marker
 
 WALL_HEIGHT_M = 1.0
 BODY_HEIGHT_M = 0.25
+MARKER_OFFSET_M = 0.01  # markers float this far in front of their wall (no z-fighting)
 
 
 # ---------------------------------------------------------------------------------- walls
@@ -232,6 +236,63 @@ def beam_segments(
     seg[:, 1, 1] = sy[slot] + rr * np.sin(aa)
     seg[:, :, 2] = z_m
     return seg, slot, hit[slot, beam]
+
+
+# ---------------------------------------------------------------------------------- markers
+def marker_quad(marker: Marker, offset_m: float = MARKER_OFFSET_M) -> np.ndarray:
+    """(4, 3) corners of ``marker``'s printed square (quiet zone included), moved ``offset_m``
+    out of its wall along the face's normal: top-left, top-right, bottom-right, bottom-left as
+    seen from the front (texture row 0 at the top, column 0 on the left)."""
+    nx, ny = marker.normal_xy
+    return marker.corners_world(quiet_zone=True) + offset_m * np.array([nx, ny, 0.0])
+
+
+def image_corners_local(width_m: float, height_m: float) -> np.ndarray:
+    """(4, 3) where the viewer draws the top-left, top-right, bottom-right and bottom-left
+    pixel corners of an image node (viser's ``add_image``: a plane in the node's x-y plane,
+    column 0 at -x, row 0 at -y, read the right way round looking along the node's +z)."""
+    w, h = 0.5 * width_m, 0.5 * height_m
+    return np.array([[-w, -h, 0.0], [w, -h, 0.0], [w, h, 0.0], [-w, h, 0.0]])
+
+
+def marker_pose(marker: Marker, offset_m: float = MARKER_OFFSET_M) -> tuple[np.ndarray, np.ndarray]:
+    """(position (3,), wxyz (4,)) of the image node that shows ``marker``: centred on it,
+    ``offset_m`` out of the wall, its x to the right and y down as seen from the front and its
+    z into the wall, so :func:`image_corners_local` lands on :func:`marker_quad`."""
+    nx, ny = marker.normal_xy
+    rx, ry = marker.right_xy
+    rot = np.array([[rx, 0.0, -nx], [ry, 0.0, -ny], [0.0, -1.0, 0.0]])  # columns: x, y, z
+    position = np.asarray(marker.center_xyz_m, dtype=np.float64) + offset_m * np.array(
+        [nx, ny, 0.0]
+    )
+    return position, _quat_of(rot)
+
+
+def marker_image(marker: Marker, min_px: int = 128) -> np.ndarray:
+    """The marker's texture (quiet zone included) scaled up by whole pixels to at least
+    ``min_px`` on a side, so that the browser's texture filtering keeps the modules sharp."""
+    tex = marker.texture
+    k = max(1, -(-int(min_px) // max(tex.shape[:2])))
+    return np.ascontiguousarray(np.repeat(np.repeat(tex, k, axis=0), k, axis=1))
+
+
+def _quat_of(r: np.ndarray) -> np.ndarray:
+    """(w, x, y, z) of a rotation matrix (3, 3) (Shepperd's method)."""
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    if tr > 0:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
+        q = [0.0] * 4
+        q[0] = (r[k, j] - r[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (r[j, i] + r[i, j]) / s
+        q[1 + k] = (r[k, i] + r[i, k]) / s
+    out = np.array(q)
+    return out / np.linalg.norm(out)
 
 
 # ---------------------------------------------------------------------------------- views

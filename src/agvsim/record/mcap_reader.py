@@ -65,7 +65,8 @@ class GridMessage:
 
 
 def _yaw(q) -> float:
-    return float(2.0 * np.arctan2(q.z, q.w))
+    """The heading of a rotation (its yaw in z-y-x Euler angles; a pure yaw for planar ones)."""
+    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
 
 
 class Recording:
@@ -235,7 +236,8 @@ class Recording:
         return np.array([t for t, _ in msgs]), [m.data for _, m in msgs]
 
     def static_transforms(self) -> dict[str, tuple[str, float, float, float]]:
-        """child frame -> (parent frame, x, y, yaw) from ``/tf_static``."""
+        """child frame -> (parent frame, x, y, yaw) from ``/tf_static`` (the planar part: a
+        camera's height and pitch are left out)."""
         out: dict[str, tuple[str, float, float, float]] = {}
         if "/tf_static" not in self.types:
             return out

@@ -14,6 +14,7 @@ topic                           type                         when
 ==============================  ===========================  ==================================
 /agvsim/scenario                std_msgs/String              once, t = 0: the scenario YAML
 /tf_static                      tf2_msgs/TFMessage           once: base_link -> each sensor
+                                                             (cameras in 3D, + _optical)
 /map                            nav_msgs/OccupancyGrid       t = 0 and whenever the walls change
 /tf                             tf2_msgs/TFMessage           pose rate: map -> odom -> base_link
 /<robot>/ground_truth           nav_msgs/Odometry            pose rate (map frame)
@@ -181,19 +182,25 @@ class Recorder:
 
     # ------------------------------------------------------------------ static topics
     def _write_tf_static(self, t_ns: int) -> None:
+        """``<robot>/base_link`` -> each range sensor (planar: x, y, yaw) and each camera (x,
+        y, z, yaw then pitch, REP-103 body axes), and camera -> ``<camera>_optical`` (z
+        forward, x right, y down: the frame of its images)."""
         tab = self.sim.sensors
-        tfs = []
+        tfs: list[msg.Transform3D] = []
         for s in range(tab.count):
             base = f"{self.robot_topics[int(tab.owner[s])]}/base_link"
             mx, my, myaw = (float(v) for v in tab.mount[s])
-            tfs.append((base, self._scan_frames[s], mx, my, myaw))
+            tfs.append((base, self._scan_frames[s], (mx, my, 0.0), msg.yaw_quaternion(myaw)))
         for f in sim_frames(self.sim):
             spec = self.sim.robots[f.robot].cameras[self._camera_index(f)]
             base = f"{self.robot_topics[f.robot]}/base_link"
-            x, y = spec.mount_xy_m
-            tfs.append((base, self._camera_names[f.slot], x, y, spec.mount_yaw_rad))
+            cam = self._camera_names[f.slot]
+            x, y = (float(v) for v in spec.mount_xy_m)
+            q = msg.yaw_pitch_quaternion(spec.mount_yaw_rad, spec.pitch_rad)
+            tfs.append((base, cam, (x, y, float(spec.mount_z_m)), q))
+            tfs.append((cam, f"{cam}_optical", (0.0, 0.0, 0.0), msg.OPTICAL_QUATERNION))
         if tfs:
-            self._write("/tf_static", msg.TF_MESSAGE, t_ns, msg.encode_tf(t_ns, tfs))
+            self._write("/tf_static", msg.TF_MESSAGE, t_ns, msg.encode_tf_3d(t_ns, tfs))
 
     # ------------------------------------------------------------------ every step
     def record(self) -> None:
@@ -272,7 +279,8 @@ class Recorder:
             if f.seq > self._camera_seq[f.slot]:
                 self._camera_seq[f.slot] = f.seq
                 name = self._camera_names[f.slot]
-                self.write_image(f"/{name}/image/compressed", f.stamp_s, name, f.rgb, "jpeg")
+                topic, frame = f"/{name}/image/compressed", f"{name}_optical"
+                self.write_image(topic, f.stamp_s, frame, f.rgb, "jpeg")
 
     def _write_states(self, t_ns: int) -> None:
         states = self.sim.active_states()
@@ -341,7 +349,7 @@ class Recorder:
     ) -> None:
         """Write a ``sensor_msgs/CompressedImage``: ``image`` is (H, W, 3) uint8 RGB (encoded
         here as ``fmt``, ``"jpeg"`` or ``"png"``) or already encoded bytes. The camera hook:
-        topic ``/<robot>/<camera>/image/compressed``, frame ``<robot>/<camera>``."""
+        topic ``/<robot>/<camera>/image/compressed``, frame ``<robot>/<camera>_optical``."""
         if fmt not in ("jpeg", "png"):
             raise ValueError(f"{topic}: image format must be 'jpeg' or 'png', got {fmt!r}")
         if isinstance(image, bytes | bytearray):

@@ -177,14 +177,37 @@ def encode_string(text: str) -> bytes:
     return c.bytes()
 
 
+def yaw_pitch_quaternion(yaw: float, pitch: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw`` about z, then by ``pitch`` about the turned y
+    (REP-103 body axes x forward, y left, z up: a positive pitch tips x down), i.e.
+    ``q_z(yaw) * q_y(pitch)``."""
+    cy, sy = math.cos(yaw / 2.0), math.sin(yaw / 2.0)
+    cp, sp = math.cos(pitch / 2.0), math.sin(pitch / 2.0)
+    return (-sy * sp, cy * sp, sy * cp, cy * cp)
+
+
+#: (x, y, z, w) from a camera's body frame (x forward, y left, z up) to its optical frame
+#: (z forward, x right, y down), the fixed rotation of ROS's ``*_optical`` frames (REP-103)
+OPTICAL_QUATERNION = (-0.5, 0.5, -0.5, 0.5)
+
+Transform3D = tuple[str, str, tuple[float, float, float], tuple[float, float, float, float]]
+
+
 def encode_tf(t_ns: int, transforms: list[tuple[str, str, float, float, float]]) -> bytes:
     """``tf2_msgs/TFMessage``: (parent, child, x, y, theta) planar transforms, z = 0."""
+    return encode_tf_3d(
+        t_ns, [(p, ch, (x, y, 0.0), yaw_quaternion(th)) for p, ch, x, y, th in transforms]
+    )
+
+
+def encode_tf_3d(t_ns: int, transforms: list[Transform3D]) -> bytes:
+    """``tf2_msgs/TFMessage``: (parent, child, (x, y, z), (qx, qy, qz, qw)) transforms."""
     c = Cdr()
     c.u32(len(transforms))
-    for parent, child, x, y, th in transforms:
+    for parent, child, xyz, q in transforms:
         c.header(t_ns, parent)
         c.string(child)
-        c.f64(x, y, 0.0, *yaw_quaternion(th))
+        c.f64(*xyz, *q)
     return c.bytes()
 
 

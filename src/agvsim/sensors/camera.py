@@ -13,7 +13,9 @@ looks along ``(1, -(u - cx) / f, -(v - cy) / f)`` in the camera frame (:attr:`Ca
 
 Images: ``rgb (H, W, 3)`` uint8; ``depth (H, W)`` float32 z-depth in metres (distance along the
 optical axis, as an RGB-D camera reports), ``+inf`` where nothing lies within ``range_max_m``
-(measured horizontally, like a lidar beam; such pixels show the sky colour).
+(measured horizontally, like a lidar beam; such pixels show the sky colour). With
+``noise_std`` > 0 the RGB image gets Gaussian pixel noise (:func:`add_pixel_noise`, from the
+simulation's seeded generator, rounded and clipped to 0..255); the depth image stays exact.
 
 How it renders (one vertical plane per column): every pixel's ray lies in a vertical plane of
 some azimuth. Per azimuth the renderer casts ONE 2-D ray through the grid (the lidar's DDA,
@@ -53,6 +55,7 @@ class CameraSpec:
     mount_yaw_rad: float = 0.0
     pitch_rad: float = 0.0  # positive: looking down
     range_max_m: float = 30.0
+    noise_std: float = 0.0  # Gaussian pixel noise, std in 0..255 intensity levels (0: off)
 
     def __post_init__(self) -> None:
         n = f"camera {self.name!r}"
@@ -69,6 +72,10 @@ class CameraSpec:
             raise ValueError(f"{n}: rate_hz must be > 0, got {self.rate_hz}")
         if not (self.range_max_m > 0 and math.isfinite(self.range_max_m)):
             raise ValueError(f"{n}: range_max_m must be > 0, got {self.range_max_m}")
+        if not 0.0 <= self.noise_std <= 255.0:
+            raise ValueError(
+                f"{n}: noise_std must be 0..255 (intensity levels), got {self.noise_std}"
+            )
         if not self.mount_z_m > 0:
             raise ValueError(f"{n}: mount_z_m must be above the floor (> 0), got {self.mount_z_m}")
         if abs(self.pitch_rad) + self.vfov_rad / 2 >= _MAX_PITCH_VIEW:
@@ -379,6 +386,15 @@ def render_view(table, rays, cam, scene, marks, boxes, rgb, depth):
                 rgb[p, 0] = min(brgb[j, 0] * g, 255.0)
                 rgb[p, 1] = min(brgb[j, 1] * g, 255.0)
                 rgb[p, 2] = min(brgb[j, 2] * g, 255.0)
+
+
+def add_pixel_noise(rgb: np.ndarray, std: float, rng: np.random.Generator) -> np.ndarray:
+    """``rgb`` (H, W, 3) uint8 plus independent Gaussian noise of ``std`` intensity levels on
+    every channel of every pixel, rounded and clipped to 0..255 (a new array). The noise comes
+    from ``rng`` (the simulation's generator), so the same seed gives the same frames."""
+    noise = rng.standard_normal(rgb.shape, dtype=np.float32)
+    out = rgb.astype(np.float32) + np.float32(std) * noise
+    return np.clip(np.rint(out), 0.0, 255.0).astype(np.uint8)
 
 
 # ---------------------------------------------------------------------------------- geometry

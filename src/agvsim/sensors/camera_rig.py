@@ -21,7 +21,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from agvsim.geometry import box_tables
-from agvsim.sensors.camera import CameraSpec, MarkerView, marker_views, pixel_rays, render_view
+from agvsim.sensors.camera import (
+    CameraSpec,
+    MarkerView,
+    add_pixel_noise,
+    marker_views,
+    pixel_rays,
+    render_view,
+)
 from agvsim.sensors.grid_dda import mark_empty_space, pad_grid
 from agvsim.sim.spec import BOX_HEIGHT_M, WALL_HEIGHT_M, RobotSpec, World
 from agvsim.world.grid import OccupancyGrid
@@ -131,7 +138,8 @@ class CameraRig:
         self, slot: int, robot_pose: np.ndarray, footprints: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """One frame of camera ``slot`` with its robot at ``robot_pose`` and every robot's
-        footprint ``(N, 5)`` (the static boxes are added here): ``(rgb, depth)``."""
+        footprint ``(N, 5)`` (the static boxes are added here): ``(rgb, depth)``, without pixel
+        noise (``render_due`` adds it)."""
         spec = self.specs[slot]
         boxes = footprints
         if len(self.world.boxes):
@@ -176,9 +184,16 @@ class CameraRig:
         state.image_pose = np.zeros((c, 3))
         state.next_image_s = np.zeros(c)
 
-    def render_due(self, state, footprints: np.ndarray, force: bool = False) -> int:
+    def render_due(
+        self,
+        state,
+        footprints: np.ndarray,
+        force: bool = False,
+        rng: np.random.Generator | None = None,
+    ) -> int:
         """Render every camera due at ``state.t_s`` (all when ``force``) into ``state``;
-        returns how many frames were rendered."""
+        returns how many frames were rendered. Cameras with ``noise_std`` > 0 draw their pixel
+        noise from ``rng`` (the simulation's generator; slot order, so runs repeat)."""
         due = np.ones(self.count, bool) if force else state.t_s >= state.next_image_s - 1e-9
         if not due.any():
             return 0
@@ -190,7 +205,15 @@ class CameraRig:
         done = 0
         for slot in np.flatnonzero(due):
             pose = state.poses[self.owner[slot]]
-            rgb, depth = self._render(slot, pose, boxes, btab, self.specs[slot])
+            spec = self.specs[slot]
+            rgb, depth = self._render(slot, pose, boxes, btab, spec)
+            if spec.noise_std > 0.0:
+                if rng is None:
+                    raise ValueError(
+                        f"camera {spec.name!r} has noise_std > 0: render_due needs the "
+                        "simulation's generator (rng)"
+                    )
+                rgb = add_pixel_noise(rgb, spec.noise_std, rng)
             rgb.setflags(write=False)
             depth.setflags(write=False)
             state.images[slot] = rgb

@@ -464,7 +464,7 @@ class Simulation:
     def _render(self, force: bool = False) -> None:
         """Render the cameras that are due (see :mod:`agvsim.sensors.camera_rig`)."""
         if self.cameras is not None:
-            self.cameras.render_due(self.state, self.footprints(self.state.poses), force)
+            self.cameras.render_due(self.state, self.footprints(self.state.poses), force, self.rng)
 
     def camera_frames(self) -> list[CameraFrame]:
         """The latest frame of every camera of every robot (empty without cameras)."""

@@ -11,6 +11,9 @@ browser and player opens.
         sim.step()
         video.record()                       # a frame whenever 1 / fps s have passed
     video.close()
+
+The browser app records the same way from its step loop; when it rebuilds its simulation (an
+edit in the mask, a reset) ``follow(new_sim)`` carries the videos on from the new one.
 """
 
 from __future__ import annotations
@@ -31,6 +34,15 @@ def _even(n: int, block: int = 16) -> int:
 
 def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]", "_", name)
+
+
+def _camera_frames(sim) -> list:
+    return sim.camera_frames() if hasattr(sim, "camera_frames") else []
+
+
+def _camera_key(frame) -> str:
+    """``<robot>_<camera>``: the name of a camera's video (without ``.mp4``)."""
+    return f"{_safe(frame.robot_name)}_{_safe(frame.camera)}"
 
 
 class _Stream:
@@ -99,14 +111,15 @@ class VideoRecorder:
         self.streams: dict[str, _Stream] = {
             "top": _Stream(self.out / "top.mp4", width, height, fps)
         }
-        self._cams: dict[int, str] = {}
-        if cameras and hasattr(sim, "camera_frames"):
-            for f in sim.camera_frames():
-                key = f"{_safe(f.robot_name)}_{_safe(f.camera)}"
+        self._cams: set[str] = set()
+        if cameras:
+            for f in _camera_frames(sim):
+                key = _camera_key(f)
                 h, w = f.rgb.shape[:2]
                 self.streams[key] = _Stream(self.out / f"{key}.mp4", w, h, fps)
-                self._cams[f.slot] = key
+                self._cams.add(key)
         self._trail = np.zeros((sim.n, 1024, 2))  # (N, capacity, 2) grows by doubling
+        self._trail_k0 = 0  # the frame the trails start at
         self._k = 0  # frames written
         self._closed = False
         self._t0 = sim.state.t_s
@@ -115,6 +128,38 @@ class VideoRecorder:
     @property
     def paths(self) -> list[Path]:
         return [s.path for s in self.streams.values()]
+
+    @property
+    def frames(self) -> int:
+        """Frames written to the top view so far."""
+        return self._k
+
+    @property
+    def seconds(self) -> float:
+        """Seconds of video written so far (frames / fps)."""
+        return self._k / self.fps
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def follow(self, sim) -> None:
+        """Go on recording from ``sim`` (a rebuilt simulation: same scenario edited, reset).
+        The next frame is due at once when its clock went back; the trails start afresh
+        unless the same robots go on at the same time. Cameras are matched by robot and camera
+        name; one that is new gets no video, one that is gone gets no more frames."""
+        if sim is self.sim:
+            return
+        old, self.sim = self.sim, sim
+        t = sim.state.t_s
+        due = self._t0 + self._k / self.fps
+        same_robots = [r.name for r in sim.robots] == [r.name for r in old.robots]
+        if t < due - 1.0 / self.fps - 1e-9 or t > due + 1.0:  # the clock jumped: rebase it
+            self._t0 = t - self._k / self.fps
+            same_robots = False
+        if not same_robots:
+            self._trail = np.zeros((sim.n, 1024, 2))
+            self._trail_k0 = self._k
 
     def record(self) -> None:
         """Write the frames due by the simulation's current time (none, one, or several when a
@@ -128,22 +173,30 @@ class VideoRecorder:
         sim = self.sim
         trails = None
         if self.trails:
-            k = self._k
+            k = self._k - self._trail_k0
             if k >= self._trail.shape[1]:
                 self._trail = np.concatenate([self._trail, np.zeros_like(self._trail)], axis=1)
             self._trail[:, k] = sim.state.poses[:, :2]
             trails = [self._trail[i, : k + 1] for i in range(sim.n)]
         self.streams["top"].write(self.view.render(sim, beams=self.beams, trails=trails))
         if self._cams:
-            for f in sim.camera_frames():
-                key = self._cams.get(f.slot)
-                if key is not None:
+            for f in _camera_frames(sim):
+                key = _camera_key(f)
+                if key in self._cams:
                     self.streams[key].write(f.rgb)
 
     def close(self) -> None:
         """Write the frames still due (a step not yet seen) and finish the files."""
         if not self._closed:
             self._closed = True
-            self.record()
-            for s in self.streams.values():
-                s.close()
+            try:
+                self.record()
+            finally:  # every file is finished, even when the last frame fails
+                errors = []
+                for s in self.streams.values():
+                    try:
+                        s.close()
+                    except (OSError, RuntimeError) as err:
+                        errors.append(err)
+                if errors:
+                    raise errors[0]
