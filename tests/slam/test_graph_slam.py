@@ -156,12 +156,19 @@ def test_wrong_candidate_is_rejected_right_one_accepted() -> None:
     assert det.match(101, pts_b, slam.angular_step(pts_b), truth, truth, sub, g_sub) is None
 
 
-def closure(node: int, matched: tuple, estimate: tuple, local: tuple) -> LoopClosure:
+def closure(
+    node: int,
+    matched: tuple,
+    estimate: tuple,
+    local: tuple,
+    submap: int = 0,
+    score: float = 0.9,
+) -> LoopClosure:
     return LoopClosure(
         node,
-        0,
+        submap,
         np.zeros(3),
-        0.9,
+        score,
         np.array(matched, float),
         np.array(estimate, float),
         np.array(local, float),
@@ -175,10 +182,28 @@ def test_verification_needs_agreement() -> None:
     assert len(det.verify(closure(1, (1.0, 0.0, 0.0), (1.05, 0.0, 0.01), (1.0, 0.0, 0.0)))) == 1
     # a 2 m jump alone waits; an inconsistent second one does not confirm it ...
     assert det.verify(closure(2, (3.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 0.0, 0.0))) == []
-    assert det.verify(closure(3, (0.0, 5.0, 1.0), (1.5, 0.0, 0.0), (1.5, 0.0, 0.0))) == []
-    # ... a consistent one (same jump, 0.5 m further on in both frames) confirms both
-    both = det.verify(closure(4, (3.5, 0.0, 0.0), (1.5, 0.0, 0.0), (1.5, 0.0, 0.0)))
-    assert [c.node for c in both] == [2, 4]
+    assert det.verify(closure(8, (0.0, 5.0, 1.0), (1.5, 0.0, 0.0), (1.5, 0.0, 0.0), 1)) == []
+    # ... a consistent one (same jump, 0.5 m further on in both frames) from another submap
+    # and some keyframes later (new geometry) confirms both
+    both = det.verify(closure(9, (3.5, 0.0, 0.0), (1.5, 0.0, 0.0), (1.5, 0.0, 0.0), 1))
+    assert [c.node for c in both] == [2, 9]
+
+
+def test_look_alike_closures_do_not_confirm_each_other() -> None:
+    cfg = LoopConfig()
+    det = LoopDetector(cfg, 0.05)
+    jump = ((3.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+    later = ((3.5, 0.0, 0.0), (1.5, 0.0, 0.0), (1.5, 0.0, 0.0))
+    # the next keyframe sees the same walls: the same wrong fit, no confirmation
+    assert det.verify(closure(2, *jump)) == []
+    assert det.verify(closure(2 + cfg.confirm_gap - 1, *later, submap=1)) == []
+    # nor does the same submap matched again further on
+    assert det.verify(closure(2 + cfg.confirm_gap + 1, *later, submap=0)) == []
+    # a fit far from the graph's estimate scoring under jump_min_score is dropped outright:
+    # a consistent strong one later finds nothing to confirm
+    det.clear_pending()
+    assert det.verify(closure(30, *jump, score=cfg.jump_min_score - 0.01)) == []
+    assert det.verify(closure(30 + cfg.confirm_gap, *later, submap=1)) == []
 
 
 def test_intel_slice_runs_and_improves_on_odometry(tmp_path: Path) -> None:

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.mapping import likelihood_field
@@ -105,6 +107,30 @@ def test_branch_and_bound_finds_large_offset_and_is_exact() -> None:
     assert bb == pytest.approx(ex, abs=1e-6)
     # below the minimum score nothing is returned
     assert sm.branch_and_bound(pyr, ox, oy, RES, pts, guess, 1.2, 0.2, step, 0.999)[1] == -1.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    win_cells=st.integers(1, 23),
+    cx=st.floats(-0.5, 2.5),
+    cy=st.floats(-0.5, 2.5),
+)
+def test_branch_and_bound_equals_exhaustive_search(
+    seed: int, win_cells: int, cx: float, cy: float
+) -> None:
+    # random likelihoods on a small grid, a random point cloud around (cx, cy): windows of
+    # every size relative to the pyramid's blocks, points falling off every edge of the grid
+    rng = np.random.default_rng(seed)
+    grid = rng.random((40, 50)).astype(np.float32) ** 4
+    pts = rng.normal(0.0, 0.6, (25, 2))
+    pose0 = np.array([cx, cy, rng.uniform(-math.pi, math.pi)])
+    win, ang, step = win_cells * RES, math.radians(4.0), math.radians(2.0)
+    _, bb = sm.branch_and_bound(
+        sm.max_pyramid(grid, 4), 0.0, 0.0, RES, pts, pose0, win, ang, step, -0.5
+    )  # a minimum score under every score: the best candidate is always returned
+    _, ex = sm.correlative_search(grid, 0.0, 0.0, RES, pts, pose0, win, ang, step, 0.0, 0.0)
+    assert bb == pytest.approx(ex, abs=1e-6)
 
 
 def test_max_pyramid_is_block_maximum() -> None:

@@ -60,6 +60,9 @@ class SlamConfig:
     sigma_local_m: float = 0.02  # std of a local-SLAM relative pose (keyframe chain, submaps)
     sigma_local_rad: float = math.radians(0.5)
     huber_scale: float = 3.0  # in standard deviations
+    odometry_edges: bool = True  # keyframe-to-keyframe odometry edges, weighted by the noise
+    odometry_floor_m: float = 0.002  # that tracking estimated (floors of their std per scan)
+    odometry_floor_rad: float = math.radians(0.02)
     optimize_every: int = 50  # keyframes at least between two optimisations of small closures
 
 
@@ -74,6 +77,7 @@ class _Keyframe:
     ends: NDArray[np.float32]  # (m, 2) beam end points for the map, robot frame
     hits: NDArray[np.bool_]  # (m,) True: a return; False: the ray only clears space
     ang_step: float  # angular search step for its points (rad)
+    odom: F64  # (3,) the robot's odometry pose at the keyframe
     submap: int = -1  # the submap it was matched against (the most complete)
 
 
@@ -91,6 +95,13 @@ class GraphSlam:
         self.cfg = cfg = config or SlamConfig()
         self.max_range_m = cfg.max_range_m or min(sensor_max_range_m, cfg.usable_range_m)
         self.laser_offset = np.zeros(3) if laser_offset is None else np.asarray(laser_offset, float)
+        # the first scans, kept to be processed again once odometry's and the matches' noises
+        # are known (None after that, or without odometry fusion)
+        self._warmup: list[tuple] | None = [] if cfg.tracking.fuse_odometry else None
+        self._reset()
+
+    def _reset(self) -> None:
+        cfg = self.cfg
         self.tracker = Tracker(cfg.tracking)
         self.motion = MotionFilter(
             cfg.keyframe_distance_m, cfg.keyframe_angle_rad, cfg.keyframe_time_s
@@ -112,11 +123,33 @@ class GraphSlam:
         self._unoptimised: list[LoopClosure] = []
         self._last_optimised_node = 0
         self._info_local = _information(cfg.sigma_local_m, cfg.sigma_local_rad)
+        self._scan_at_keyframe = 0
+        self._odom = np.zeros(3)  # odometry pose of the scan being processed
 
     # ------------------------------------------------------------------ the algorithm
     def update(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
         """Process one scan (ranges (n,) m, inf = no return; angles (n,) rad in the laser
-        frame; odom_pose (3,) robot base pose by odometry); returns its global pose (3,)."""
+        frame; odom_pose (3,) robot base pose by odometry); returns its global pose (3,).
+
+        The first ``fusion_warmup`` scans are matched alone while the noises of odometry and
+        of the matches are learnt from them; then they are processed again with odometry
+        fused (their poses and the first submaps are replaced)."""
+        if self._warmup is not None:
+            self._warmup.append((timestamp, ranges, angles, odom_pose))
+            if len(self._warmup) >= self.cfg.tracking.fusion_warmup:
+                fusion = self.tracker.fusion
+                scans, self._warmup = self._warmup[:-1], None
+                if fusion is not None and fusion.ready(final=False):
+                    learnt = fusion.estimate()
+                    self._reset()
+                    if self.tracker.fusion is not None:
+                        self.tracker.fusion.preset(learnt)
+                    for args in scans:
+                        self._step(*args)
+        return self._step(timestamp, ranges, angles, odom_pose)
+
+    def _step(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
+        self._odom = np.asarray(odom_pose, np.float64)
         points, ends, hits = self.scan_points(ranges, angles)
         guess = self.tracker.predict(odom_pose)
         pose, _ = self.tracker.match(points, guess, self.angular_step(points))
@@ -167,7 +200,9 @@ class GraphSlam:
     ) -> int:
         """Graph node for the keyframe, edges to the previous keyframe and its submaps."""
         node = len(self.keyframes)
-        kf = _Keyframe(pose.copy(), points, ends, hits, self.angular_step(points))
+        kf = _Keyframe(
+            pose.copy(), points, ends, hits, self.angular_step(points), self._odom.copy()
+        )
         self.keyframes.append(kf)
         var = self.graph.add_node(compose(self._global_from_local, pose))
         self.node_var.append(var)
@@ -176,6 +211,15 @@ class GraphSlam:
             self.graph.add_edge(
                 self.node_var[node - 1], var, between(prev.local, pose), self._info_local
             )
+            noise = self.tracker.odometry_variance()
+            if self.cfg.odometry_edges and noise is not None:
+                # odometry's error is a random walk: the variance grows with the scans between
+                n = max(len(self.scan_times) - self._scan_at_keyframe, 1)
+                v_t = n * max(noise[0], self.cfg.odometry_floor_m**2)
+                v_r = n * max(noise[1], self.cfg.odometry_floor_rad**2)
+                info = np.diag([1.0 / v_t, 1.0 / v_t, 1.0 / v_r])
+                self.graph.add_edge(self.node_var[node - 1], var, between(prev.odom, kf.odom), info)
+        self._scan_at_keyframe = len(self.scan_times)
         n_before = len(self.tracker.submaps)
         sensor_xy = compose(pose, self.laser_offset)[:2]
         self.tracker.insert(node, pose, sensor_xy, compose(pose, _xy0(ends))[:, :2], hits)

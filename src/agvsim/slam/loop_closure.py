@@ -51,6 +51,8 @@ class LoopConfig:
     agree_m: float = 0.3
     agree_rad: float = math.radians(3.0)
     pending_nodes: int = 20  # how long an unconfirmed closure waits for a second one
+    jump_min_score: float = 0.7  # a closure that moves the graph needs at least this score
+    confirm_gap: int = 5  # ... from a keyframe at least this many keyframes later (new geometry)
     sigma_m: float = 0.05  # std of a match along its best-constrained direction
     min_eigen_ratio: float = 0.02  # floor of the information along weak directions (corridors)
     pyramid_levels: int = 6
@@ -181,9 +183,15 @@ class LoopDetector:
         self._pending = [p for p in self._pending if closure.node - p.node <= cfg.pending_nodes]
         if self.agrees(between(closure.estimate, closure.matched)):
             return [closure]
+        if closure.score < cfg.jump_min_score:
+            return []  # a weak fit far from the graph's estimate: most likely a look-alike
         for p in self._pending:
             err = between(between(p.matched, closure.matched), between(p.local, closure.local))
-            if p.node != closure.node and self.agrees(err):
+            if (
+                closure.node - p.node >= cfg.confirm_gap
+                and closure.submap != p.submap
+                and self.agrees(err)
+            ):
                 self._pending.remove(p)
                 return [p, closure]
         self._pending.append(closure)

@@ -34,6 +34,7 @@ __all__ = [
     "branch_and_bound",
     "correlative_search",
     "gauss_newton",
+    "match_hessian",
     "max_pyramid",
     "score_pose",
 ]
@@ -112,6 +113,24 @@ def _offset_score(grid: np.ndarray, cells: np.ndarray, a: int, dx: int, dy: int)
     total = 0.0
     for k in range(cells.shape[1]):
         total += _cell_value(grid, cells[a, k, 1] + dy, cells[a, k, 0] + dx)
+    return total / max(cells.shape[1], 1)
+
+
+@njit(cache=True)
+def _block_score(
+    level: np.ndarray, cells: np.ndarray, a: int, dx: int, dy: int, size: int
+) -> float:
+    """Upper bound of the score of every offset in ``[dx, dx + size) x [dy, dy + size)``: the
+    mean of the pyramid ``level`` (blocks of ``size`` cells). A block that starts below the
+    grid's first row or column but reaches into it is bounded by the block at index 0, which
+    contains its part inside the grid (looking up the negative index would give 0, no bound)."""
+    total = 0.0
+    for k in range(cells.shape[1]):
+        ix = cells[a, k, 0] + dx
+        iy = cells[a, k, 1] + dy
+        if ix + size <= 0 or iy + size <= 0:
+            continue
+        total += _cell_value(level, max(iy, 0), max(ix, 0))
     return total / max(cells.shape[1], 1)
 
 
@@ -220,7 +239,7 @@ def branch_and_bound(
             for i in range(nside):
                 dx, dy = -w + i * step, -w + j * step
                 root_a[r], root_x[r], root_y[r] = a, dx, dy
-                root_s[r] = _offset_score(pyramid[top], cells, a, dx, dy)
+                root_s[r] = _block_score(pyramid[top], cells, a, dx, dy, step)
                 r += 1
     order = _sort_desc(root_s)
     n = 0
@@ -254,7 +273,7 @@ def branch_and_bound(
                 if cx > w or cy > w:
                     continue
                 ch_x[m], ch_y[m] = cx, cy
-                ch_s[m] = _offset_score(pyramid[lvl - 1], cells, a, cx, cy)
+                ch_s[m] = _block_score(pyramid[lvl - 1], cells, a, cx, cy, half)
                 m += 1
         order4 = np.argsort(ch_s[:m])  # ascending: best pushed last, popped first
         for q in range(m):
@@ -266,6 +285,27 @@ def branch_and_bound(
         return pose0.copy(), -1.0
     out = np.array([pose0[0] + best_x * res, pose0[1] + best_y * res, angles[best_a]])
     return out, best
+
+
+@njit(cache=True)
+def match_hessian(
+    grid: np.ndarray, ox: float, oy: float, res: float, points: np.ndarray, pose: np.ndarray
+) -> np.ndarray:
+    """``J^T J / n`` (3, 3) of the match residuals at ``pose`` (as :func:`gauss_newton`
+    returns it): how sharply the scan's fit changes with each pose increment."""
+    n = points.shape[0]
+    h = np.zeros((3, 3))
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    for k in range(n):
+        px, py = points[k, 0], points[k, 1]
+        _, gx, gy = _bilinear(
+            grid, ox, oy, res, pose[0] + c * px - s * py, pose[1] + s * px + c * py
+        )
+        j = (gx, gy, gx * (-s * px - c * py) + gy * (c * px - s * py))
+        for a in range(3):
+            for b in range(3):
+                h[a, b] += j[a] * j[b]
+    return h / max(n, 1)
 
 
 @njit(cache=True)

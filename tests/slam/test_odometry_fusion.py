@@ -1,0 +1,72 @@
+"""Odometry fusion in tracking: the noises of odometry and of the scan matches are told apart
+by how they grow with the number of scans, and the fused track beats both."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agvsim.slam.frontend import OdometryFusion
+from agvsim.slam.se2 import compose
+
+
+def feed(sigma_match: float, sigma_odom: float, n: int = 600, seed: int = 0):
+    """A robot driving a gentle arc, 5 cm per scan: matches = truth + white noise (each is
+    placed against a fixed map), odometry = truth + a random walk. Returns the fusion, the
+    truth, the fused track, the raw matches and the odometry."""
+    rng = np.random.default_rng(seed)
+    step = np.array([0.05, 0.0, 0.004])
+    truth, odom = [np.zeros(3)], [np.zeros(3)]
+    for _ in range(n - 1):
+        truth.append(compose(truth[-1], step))
+        noise = rng.normal(0.0, [sigma_odom, sigma_odom, 1e-4])
+        odom.append(compose(odom[-1], step + noise))
+    truth_a, odom_a = np.array(truth), np.array(odom)
+    matches = truth_a + rng.normal(0.0, [sigma_match, sigma_match, 1e-4], (n, 3))
+    fusion = OdometryFusion(window=300, lag=10)
+    fused = [truth_a[0].copy()]
+    for k in range(1, n):
+        guess = compose(fused[-1], _between(odom_a[k - 1], odom_a[k]))
+        fused.append(fusion.fuse(guess, matches[k], np.eye(3)))
+        fusion.add(odom_a[k])
+    return fusion, truth_a, np.array(fused), matches, odom_a
+
+
+def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    from agvsim.slam.se2 import between
+
+    return between(a, b)
+
+
+def test_noises_are_told_apart() -> None:
+    # odometry worse than the matches: both variances come out (v_L - v_1 is large)
+    fusion, *_ = feed(sigma_match=0.001, sigma_odom=0.004)
+    var_odom, var_match, _, _ = fusion.estimate()
+    # (increments over 10 scans overlap: ~30 independent ones in the window, hence factor 2)
+    assert 0.5 * 0.004**2 < var_odom < 2.0 * 0.004**2
+    assert var_match < 0.2 * var_odom
+    # odometry far better: the match's variance comes out, odometry's is known to be small
+    # (its share of v_L - v_1 is within the spread's sampling error)
+    fusion, *_ = feed(sigma_match=0.004, sigma_odom=0.0005)
+    var_odom, var_match, _, _ = fusion.estimate()
+    assert var_match == pytest.approx(0.004**2, rel=0.3)
+    assert var_odom < 0.1 * var_match
+
+
+def test_fused_track_follows_the_better_source() -> None:
+    # odometry slips, matches are good: the fused track stays with the matches
+    _, truth, fused, matches, odom = feed(sigma_match=0.001, sigma_odom=0.004)
+    half = len(truth) // 2  # after the noises are learnt
+
+    def err(track: np.ndarray) -> float:
+        return float(np.hypot(*(track[half:, :2] - truth[half:, :2]).T).mean())
+
+    assert err(fused) < 2.0 * err(matches) and err(fused) < 0.2 * err(odom)
+    # good odometry, jittery matches: the scan-to-scan motion is odometry's, not the jitter
+    _, truth, fused, matches, odom = feed(sigma_match=0.004, sigma_odom=0.0005)
+
+    def jitter(track: np.ndarray) -> float:
+        d = np.diff(track[half:, :2], axis=0) - np.diff(truth[half:, :2], axis=0)
+        return float(np.hypot(*d.T).mean())
+
+    assert jitter(fused) < 0.2 * jitter(matches)
