@@ -156,7 +156,7 @@ def test_browser_session_runs_slam_and_serves_its_live_map():
 
     s = Session(parse_scenario(_scenario(), "test"))
     assert s.slam_map("r1") is None  # nothing fed yet
-    s.step(200)  # 4 s: 41 scans
+    s.step(300)  # 6 s: 61 scans
     free, res, origin = s.slam_map("r1")
     assert res == 0.05
     assert free.min() < 0.2 and free.max() > 0.8  # walls and free space

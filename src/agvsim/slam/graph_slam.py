@@ -35,6 +35,9 @@ from agvsim.slam.se2 import between, compose, inverse
 
 __all__ = ["GraphSlam", "SlamConfig"]
 
+_MAX_WARMUP_SCANS = 2000  # kept for processing again; a robot standing still longer goes on
+_WARMUP_PASSES = 3
+
 F64 = NDArray[np.float64]
 
 
@@ -131,21 +134,30 @@ class GraphSlam:
         """Process one scan (ranges (n,) m, inf = no return; angles (n,) rad in the laser
         frame; odom_pose (3,) robot base pose by odometry); returns its global pose (3,).
 
-        The first ``fusion_warmup`` scans are matched alone while the noises of odometry and
-        of the matches are learnt from them; then they are processed again with odometry
-        fused (their poses and the first submaps are replaced)."""
+        The first scans are tracked by odometry alone while the noises of odometry and of the
+        scan matches are learnt from them (matches against a map odometry built show its
+        drift); once enough scans taken on the move are in, they are processed again with the
+        two fused (their poses and the first submaps are replaced)."""
         if self._warmup is not None:
-            self._warmup.append((timestamp, ranges, angles, odom_pose))
-            if len(self._warmup) >= self.cfg.tracking.fusion_warmup:
-                fusion = self.tracker.fusion
-                scans, self._warmup = self._warmup[:-1], None
-                if fusion is not None and fusion.ready(final=False):
-                    learnt = fusion.estimate()
+            fusion = self.tracker.fusion
+            learnt = fusion is not None and fusion.ready(final=True)
+            if learnt or len(self._warmup) >= _MAX_WARMUP_SCANS:
+                scans, self._warmup = self._warmup, None
+                for _ in range(_WARMUP_PASSES if learnt else 0):
+                    # each pass tracks with the noises the one before learnt (the first pass
+                    # had odometry alone, which hides part of a drifting odometry's error)
+                    if fusion is None or not fusion.ready(final=True):
+                        break
+                    noises = fusion.estimate()
                     self._reset()
-                    if self.tracker.fusion is not None:
-                        self.tracker.fusion.preset(learnt)
+                    fusion = self.tracker.fusion
+                    if fusion is None:
+                        break
+                    fusion.preset(noises)
                     for args in scans:
                         self._step(*args)
+            else:
+                self._warmup.append((timestamp, ranges, angles, odom_pose))
         return self._step(timestamp, ranges, angles, odom_pose)
 
     def _step(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
