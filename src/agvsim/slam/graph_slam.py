@@ -3,10 +3,12 @@
 Per scan (:meth:`GraphSlam.update`), in the order of the paper (Hess et al. 2016, after Olson
 2009 and Konolige et al. 2010):
 
-1. predict the pose from odometry and match the scan against the active submap (local SLAM,
-   :mod:`.frontend`);
+1. predict the pose from odometry, match the scan against the active submap and weigh the two
+   by their noises, learnt from the run (local SLAM, :mod:`.frontend`; the first scans are
+   processed again once the noises are known);
 2. keep it as a keyframe when the robot moved or turned enough (motion filter): a graph node
-   with edges to the submaps it is inserted in and to the previous keyframe;
+   with edges to the submaps it is inserted in and to the previous keyframe (local SLAM's
+   relative pose, and odometry's with its learnt noise);
 3. look for loop closures: finished submaps within the search radius, branch-and-bound matching,
    verification (:mod:`.loop_closure`);
 4. when a loop closed, optimise the sparse pose graph (Levenberg-Marquardt with a Huber kernel,
