@@ -243,7 +243,7 @@ def _metrics(goal: Goal, robot: str) -> dict:
 def _warm_up(sc: Any) -> None:
     """Build the task and take one step: checks it, and compiles the kernels it needs into
     numba's cache, so no task's time limit pays for a compilation."""
-    from agvsim.runner import _metrics as build_metrics
+    from agvsim.runner import build_metrics
 
     sim = build(sc)
     metrics = build_metrics(sc, sim, "scenario")

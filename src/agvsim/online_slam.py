@@ -14,6 +14,7 @@ map over the true walls, with the true, SLAM and odometry paths).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,19 @@ from agvsim.slam.loop_closure import LoopConfig
 from agvsim.slam.mapping import OccupancyMap, save_map_png, save_ros_map
 from agvsim.slam.offline import write_trajectory
 
-__all__ = ["OnlineSlam", "build_online_slams"]
+__all__ = ["OnlineSlam", "SlamResult", "build_online_slams"]
+
+
+@dataclass(frozen=True)
+class SlamResult:
+    """A finished online SLAM: its map, one pose per scan fed and the scores."""
+
+    map: OccupancyMap
+    stamps_s: np.ndarray  # (M,) scan times
+    slam_poses: np.ndarray  # (M, 3) x, y, theta: SLAM's robot base pose at each scan
+    true_poses: np.ndarray  # (M, 3) ground truth at each scan
+    odom_poses: np.ndarray  # (M, 3) dead-reckoned odometry at each scan
+    scores: dict  # summary.json's ``slam.<robot>`` (without ``dir``)
 
 
 class OnlineSlam:
@@ -53,6 +66,8 @@ class OnlineSlam:
         self.true_poses: list[np.ndarray] = []
         self.odom_poses: list[np.ndarray] = []
         self.finished = False
+        self._final_map: OccupancyMap | None = None
+        self._result: SlamResult | None = None
 
     def update(self) -> bool:
         """Feed the robot's newest scan if there is one; True when one was fed."""
@@ -79,16 +94,27 @@ class OnlineSlam:
         return self._live
 
     def finish(self) -> None:
+        """End the SLAM: its final optimisation runs once, however often this is called; later
+        scans are ignored."""
         if not self.finished and self.slam.keyframes:
             self.slam.finish()
         self.finished = True
 
-    def results(self) -> tuple[OccupancyMap, dict]:
-        """Final map and the scores: trajectory error (SLAM and, for scale, odometry alone),
-        map IoU against the true wall surface, counts."""
+    def final_map(self) -> OccupancyMap:
+        """The map once the SLAM is finished (finishes it; rendered once)."""
         self.finish()
-        grid = self.slam.occupancy_map()
-        _, est = self.slam.trajectory()
+        if self._final_map is None:
+            self._final_map = self.slam.occupancy_map()
+        return self._final_map
+
+    def results(self) -> SlamResult:
+        """Finish the SLAM and score it: the final map, the trajectories and the scores
+        (trajectory error -- SLAM and, for scale, odometry alone --, map IoU against the true
+        wall surface, counts). Computed once; later calls return the same result."""
+        if self._result is not None:
+            return self._result
+        grid = self.final_map()
+        stamps, est = self.slam.trajectory()
         truth = np.asarray(self.true_poses).reshape(-1, 3)
         odom = np.asarray(self.odom_poses).reshape(-1, 3)
         world = self.sim.world
@@ -109,35 +135,34 @@ class OnlineSlam:
                 self.start_xy,
             ),
         }
-        return grid, scores
+        self._result = SlamResult(grid, stamps, est, truth, odom, scores)
+        return self._result
 
     def write(self, out_dir: str | Path) -> dict:
         """Write the robot's SLAM outputs under ``out_dir/slam_<robot>/``; returns the scores
         (with the file names)."""
-        grid, scores = self.results()
+        r = self.results()
         d = Path(out_dir) / f"slam_{self.name}"
         d.mkdir(parents=True, exist_ok=True)
-        stamps, est = self.slam.trajectory()
-        write_trajectory(d / "trajectory.txt", stamps, est)
-        save_ros_map(grid, d / "map.yaml")
-        save_map_png(grid, d / "map.png")
+        write_trajectory(d / "trajectory.txt", r.stamps_s, r.slam_poses)
+        save_ros_map(r.map, d / "map.yaml")
+        save_map_png(r.map, d / "map.png")
         try:
             from agvsim.viz.slam_plot import plot_slam_comparison
 
             plot_slam_comparison(
-                grid,
+                r.map,
                 self.sim.world.grid,
-                est,
-                np.asarray(self.true_poses).reshape(-1, 3),
-                np.asarray(self.odom_poses).reshape(-1, 3),
+                r.slam_poses,
+                r.true_poses,
+                r.odom_poses,
                 d / "compare.png",
-                f"SLAM of {self.name}: map IoU {scores['map']['tolerant']['iou']:.3f}, "
-                f"mean error {scores['trajectory_error'].get('mean_m', float('nan')):.3f} m",
+                f"SLAM of {self.name}: map IoU {r.scores['map']['tolerant']['iou']:.3f}, "
+                f"mean error {r.scores['trajectory_error'].get('mean_m', float('nan')):.3f} m",
             )
         except ImportError:  # plotting is optional
             pass
-        scores["dir"] = d.name
-        return scores
+        return {**r.scores, "dir": d.name}
 
 
 def build_online_slams(sc: Scenario, sim: Simulation) -> list[OnlineSlam]:

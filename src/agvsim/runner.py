@@ -9,12 +9,16 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from agvsim.record.outputs import TrajectoryWriter, summary, write_summary
 from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
 from agvsim.sim.engine import ControllerError, Simulation
+
+if TYPE_CHECKING:
+    from agvsim.online_slam import OnlineSlam
 
 
 def run_scenario(
@@ -47,8 +51,8 @@ def run_scenario(
     if not total > 0:
         raise ScenarioError(source, [f"duration must be > 0 s, got {total}"])
     n_steps = int(round(total / sim.dt_s))
-    metrics = _metrics(sc, sim, source)
-    slams = _slams(sc, sim, source)
+    metrics = build_metrics(sc, sim, source)
+    slams = build_slams(sc, sim, source)
     writer = TrajectoryWriter(out / "trajectory.csv", sim, record_every)
     observers = _observers(sc, sim, out, record_mcap, video, slams)  # run.mcap, videos
     trail: dict[str, list] = {r.name: [] for r in sim.robots}
@@ -109,8 +113,9 @@ def run_scenario(
     return data
 
 
-def _metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
-    """The scenario's ``metrics:`` block as metric objects (see agvsim.metrics)."""
+def build_metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
+    """The scenario's ``metrics:`` block as metric objects by name (see agvsim.metrics); a bad
+    block raises ScenarioError naming ``source``."""
     from agvsim.metrics.capture import build_capture
     from agvsim.metrics.coverage import build_coverage
     from agvsim.metrics.reach import build_reach
@@ -130,7 +135,7 @@ def _metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
 
 
 def _observers(
-    sc: Scenario, sim: Simulation, out: Path, mcap: bool, video: bool, slams: list
+    sc: Scenario, sim: Simulation, out: Path, mcap: bool, video: bool, slams: list[OnlineSlam]
 ) -> list:
     """The run's recorders (``record()`` after each step, ``close()`` at the end, in order:
     the final SLAM maps go into run.mcap before it closes)."""
@@ -147,8 +152,9 @@ def _observers(
     return found
 
 
-def _slams(sc: Scenario, sim: Simulation, source: str) -> list:
-    """Online SLAM for the robots with a ``slam:`` block (agvsim.online_slam)."""
+def build_slams(sc: Scenario, sim: Simulation, source: str) -> list[OnlineSlam]:
+    """Online SLAM for the robots with a ``slam:`` block (agvsim.online_slam); a bad block
+    raises ScenarioError naming ``source``."""
     if not any(r.slam is not None for r in sc.robots):
         return []
     from agvsim.online_slam import build_online_slams

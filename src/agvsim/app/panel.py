@@ -18,6 +18,7 @@ from agvsim.app.mask import Field, MaskError, mask_fields, robot_from_mask
 from agvsim.app.session import SPEEDS, EditError, Session
 from agvsim.kinematics import MODELS
 from agvsim.scenario import ScenarioError
+from agvsim.sim.spec import WALL_HEIGHT_M
 
 VIEWS = ("panoramic", "top plan", "chase")
 KEYS = {
@@ -576,8 +577,6 @@ class Panel:
 def pick_cell(session: Session, origin: np.ndarray, direction: np.ndarray):
     """The maze cell a click ray points at: a wall whose top it crosses, else the floor cell
     under it. None when the ray misses the map."""
-    from agvsim.app.shapes import WALL_HEIGHT_M
-
     if abs(direction[2]) < 1e-9 or direction[2] > 0:
         return None
     for z in (WALL_HEIGHT_M, 0.0):

@@ -18,6 +18,7 @@ import viser
 
 from agvsim.app import shapes
 from agvsim.app.session import Session
+from agvsim.sim.spec import BODY_HEIGHT_M, WALL_HEIGHT_M
 from agvsim.world.grid import OccupancyGrid
 from agvsim.world.markers import Marker
 
@@ -81,7 +82,7 @@ class SceneView:
             plane_opacity=1.0,
             position=((xmin + xmax) / 2, (ymin + ymax) / 2, -0.002),
         )
-        verts, faces = shapes.wall_mesh(grid, min(shapes.WALL_HEIGHT_M, 1.0))
+        verts, faces = shapes.wall_mesh(grid, min(WALL_HEIGHT_M, 1.0))
         if len(faces):
             sc.add_mesh_simple(
                 "/walls",
@@ -146,7 +147,7 @@ class SceneView:
                 f"{root}/nose",
                 color=(250, 250, 250),
                 dimensions=(0.06, parts.body_size_m[1] * 0.5, 0.02),
-                position=(bx + parts.body_size_m[0] / 2 - 0.05, 0.0, bz + shapes.BODY_HEIGHT_M / 2),
+                position=(bx + parts.body_size_m[0] / 2 - 0.05, 0.0, bz + BODY_HEIGHT_M / 2),
                 cast_shadow=False,
                 receive_shadow=False,
             )

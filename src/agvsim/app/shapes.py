@@ -20,13 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agvsim.sim.spec import RobotSpec
+from agvsim.sim.spec import BODY_HEIGHT_M, WALL_HEIGHT_M, RobotSpec
 from agvsim.sim.state import SensorTable
 from agvsim.world.grid import OccupancyGrid
 from agvsim.world.markers import Marker
 
-WALL_HEIGHT_M = 1.0
-BODY_HEIGHT_M = 0.25
 MARKER_OFFSET_M = 0.01  # markers float this far in front of their wall (no z-fighting)
 
 

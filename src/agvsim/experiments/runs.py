@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from agvsim.record.outputs import summary
-from agvsim.runner import _metrics, _slams
+from agvsim.runner import build_metrics, build_slams
 from agvsim.scenario import Scenario, ScenarioError, build, parse_scenario
 from agvsim.sim.engine import ControllerError, Simulation
 
@@ -49,8 +49,8 @@ def execute(task: RunTask) -> dict:
 
 
 def _simulate(sc: Scenario, sim: Simulation, source: str) -> dict:
-    metrics = _metrics(sc, sim, source)
-    slams = _slams(sc, sim, source)  # robots with a ``slam:`` block: scored, no files
+    metrics = build_metrics(sc, sim, source)
+    slams = build_slams(sc, sim, source)  # robots with a ``slam:`` block: scored, no files
     n_steps = int(round(float(sc.duration_s) / sim.dt_s))
     status, error = "completed", None
     t0 = time.perf_counter()
@@ -74,7 +74,7 @@ def _simulate(sc: Scenario, sim: Simulation, source: str) -> dict:
     data["metrics"] = {name: m.result() for name, m in metrics.items()}
     row = flatten(data)
     for s in slams:
-        row.update(_flat(s.results()[1], f"slam.{s.name}"))
+        row.update(_flat(s.results().scores, f"slam.{s.name}"))
     return row
 
 
@@ -92,7 +92,7 @@ def _flat(values: dict, prefix: str) -> dict[str, Any]:
 def dry_row(sc: Scenario, sim: Simulation, source: str) -> dict:
     """The row a run of ``sim`` will give, before any step (for its column names)."""
     data = summary(sim, 0.0, {"status": "completed", "error": None})
-    data["metrics"] = {name: m.result() for name, m in _metrics(sc, sim, source).items()}
+    data["metrics"] = {name: m.result() for name, m in build_metrics(sc, sim, source).items()}
     return flatten(data)
 
 

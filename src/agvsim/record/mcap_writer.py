@@ -386,10 +386,8 @@ class SlamMaps:
 
     def close(self) -> None:
         for s in self.slams:
-            s.finish()
-            if s.slam.keyframes:
-                self.recorder.write_slam_map(s.name, self.recorder.sim.state.t_s,
-                                             s.slam.occupancy_map())  # fmt: skip
+            if s.slam.keyframes:  # final_map() finishes the SLAM; its summary reuses the map
+                self.recorder.write_slam_map(s.name, self.recorder.sim.state.t_s, s.final_map())
 
 
 def scenario_yaml(sc, seed: int | None = None) -> str:

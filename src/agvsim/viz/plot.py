@@ -3,31 +3,21 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 
 def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = "") -> None:
     """Draw the run. ``trajectories`` maps robot name -> (T, 2) xy samples."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.patches import Polygon
 
-    grid = sim.world.grid
-    xmin, xmax, ymin, ymax = grid.extent_m
-    aspect = (ymax - ymin) / max(xmax - xmin, 1e-9)
-    fig, ax = plt.subplots(figsize=(9.5, max(3.0, min(12.0, 8 * aspect)) + 0.6), dpi=110)
-    ax.imshow(
-        grid.occupied,
-        cmap="Greys",
-        vmin=0,
-        vmax=1.4,
-        origin="upper",
-        extent=(xmin, xmax, ymin, ymax),
-        interpolation="nearest",
-    )
+    fig, ax = map_figure(sim.world.grid, width_in=9.5, dpi=110, wall_vmax=1.4)
+    xmin, xmax, ymin, ymax = sim.world.grid.extent_m
     for b in sim.world.boxes:
         ax.add_patch(Polygon(_corners(b), closed=True, color="0.35"))
     st = sim.state
@@ -66,8 +56,39 @@ def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = 
     ax.set_title(title or f"t = {st.t_s:.1f} s")
     if sim.robots:
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    save_figure(fig, path, bbox_inches="tight")
+
+
+def map_figure(grid, width_in: float, dpi: int, wall_vmax: float) -> tuple[Figure, Axes]:
+    """A figure ``width_in`` inches wide, as tall as the map's aspect asks (3 to 12 in, plus
+    room for the title), with the map's walls drawn in grey (the larger ``wall_vmax``, the
+    lighter) over its extent in metres. Returns ``(fig, ax)``; :func:`save_figure` ends it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    xmin, xmax, ymin, ymax = grid.extent_m
+    aspect = (ymax - ymin) / max(xmax - xmin, 1e-9)
+    fig, ax = plt.subplots(figsize=(width_in, max(3.0, min(12.0, 8 * aspect)) + 0.6), dpi=dpi)
+    ax.imshow(
+        grid.occupied,
+        cmap="Greys",
+        vmin=0,
+        vmax=wall_vmax,
+        origin="upper",
+        extent=(xmin, xmax, ymin, ymax),
+        interpolation="nearest",
+    )
+    return fig, ax
+
+
+def save_figure(fig: Figure, path: Path, **savefig_kw) -> None:
+    """Lay out, write and close a figure from :func:`map_figure`."""
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
-    fig.savefig(path, bbox_inches="tight")
+    fig.savefig(path, **savefig_kw)
     plt.close(fig)
 
 

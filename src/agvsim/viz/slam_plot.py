@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from agvsim.viz.plot import map_figure, save_figure
+
 
 def plot_slam_comparison(
     slam_map,
@@ -18,23 +20,8 @@ def plot_slam_comparison(
 ) -> None:
     """True walls light grey, the SLAM map's occupied cells black (its free space faint blue);
     the true path green, SLAM red dashed, odometry alone orange."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    fig, ax = map_figure(grid, width_in=9.0, dpi=120, wall_vmax=4)
     xmin, xmax, ymin, ymax = grid.extent_m
-    aspect = (ymax - ymin) / max(xmax - xmin, 1e-9)
-    fig, ax = plt.subplots(figsize=(9.0, max(3.0, min(12.0, 8 * aspect)) + 0.6), dpi=120)
-    ax.imshow(
-        grid.occupied,
-        cmap="Greys",
-        vmin=0,
-        vmax=4,
-        origin="upper",
-        extent=(xmin, xmax, ymin, ymax),
-        interpolation="nearest",
-    )
     p = slam_map.probability
     ox, oy = slam_map.origin_xy_m
     h, w = p.shape
@@ -54,6 +41,4 @@ def plot_slam_comparison(
     ax.set_ylabel("y (m)")
     ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
     ax.set_title(title + "\n(grey: true walls, black: SLAM occupied cells)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)
