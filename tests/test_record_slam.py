@@ -102,6 +102,24 @@ def test_offline_slam_maps_a_recording(recording, tmp_path):
     assert res.map_png_path.stat().st_size > 0
 
 
+def test_slam_command_picks_robot_and_sensor(recording, tmp_path):
+    from typer.testing import CliRunner
+
+    from agvsim.cli import app
+
+    path, _, _ = recording
+    args = ["slam", str(path), "--out", str(tmp_path / "m"), "--quiet"]
+    ok = CliRunner().invoke(app, [*args, "--robot", "mapper", "--sensor", "lidar"])
+    assert ok.exit_code == 0, ok.output
+    assert np.loadtxt(tmp_path / "m" / "trajectory.txt").shape == (31, 4)
+    bad = CliRunner().invoke(app, [*args, "--robot", "ghost"])
+    assert bad.exit_code == 2 and "mapper/lidar" in bad.output
+    carmen = tmp_path / "log.clf"
+    carmen.write_text("# empty\n")
+    refused = CliRunner().invoke(app, ["slam", str(carmen), "--robot", "mapper", "--quiet"])
+    assert refused.exit_code == 2 and "agvsim recording (.mcap)" in refused.output
+
+
 def test_interpolate_poses_wraps_the_heading():
     t = np.array([0.0, 1.0])
     poses = np.array([[0.0, 0.0, 3.0], [1.0, 2.0, -3.0]])

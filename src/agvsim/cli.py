@@ -318,6 +318,14 @@ def slam(
         int | None, typer.Option(help="Stop after this many scans (a slice of the log).")
     ] = None,
     robust: Annotated[str, typer.Option(help="optimize: none, huber or cauchy.")] = "none",
+    robot: Annotated[
+        str | None,
+        typer.Option(help="Mapping a run.mcap: the robot whose lidar to use (default: the first)."),
+    ] = None,
+    sensor: Annotated[
+        str | None,
+        typer.Option(help="Mapping a run.mcap: that robot's lidar (default: its first)."),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """2-D graph SLAM: map a laser log (writes trajectory.txt, map.pgm/.yaml/.png to --out),
@@ -339,13 +347,20 @@ def slam(
             return
         if files:
             raise SlamCommandError(f"mapping takes one log; got extra arguments {files}")
-        _slam_log(Path(target), out_dir or Path("runs/slam"), max_scans, quiet)
+        _slam_log(Path(target), out_dir or Path("runs/slam"), max_scans, quiet, robot, sensor)
     except SlamCommandError as e:
         _fail("error", e)
         raise typer.Exit(2) from None
 
 
-def _slam_log(log: Path, out_dir: Path, max_scans: int | None, quiet: bool) -> None:
+def _slam_log(
+    log: Path,
+    out_dir: Path,
+    max_scans: int | None,
+    quiet: bool,
+    robot: str | None = None,
+    sensor: str | None = None,
+) -> None:
     from agvsim.slam.carmen import CarmenFormatError
     from agvsim.slam.offline import run_offline
 
@@ -368,6 +383,8 @@ def _slam_log(log: Path, out_dir: Path, max_scans: int | None, quiet: bool) -> N
                 out_dir,
                 max_scans=max_scans,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
+                robot=robot,
+                sensor=sensor,
             )
     except (CarmenFormatError, ValueError) as e:
         _fail("error", e)

@@ -41,10 +41,18 @@ READERS: dict[str, Callable[[Path], ScanLog]] = {
 }
 
 
-def open_log(path: str | Path) -> ScanLog:
-    """The reader registered for the file's ending (:data:`READERS`)."""
+def open_log(path: str | Path, robot: str | None = None, sensor: str | None = None) -> ScanLog:
+    """The reader registered for the file's ending (:data:`READERS`). ``robot`` and ``sensor``
+    pick the scans of a recording of several (agvsim's ``.mcap``); other logs hold one laser."""
     p = Path(path)
     name = p.name.lower()
+    if name.endswith(".mcap"):
+        return McapScanLog(p, robot, sensor)
+    if robot is not None or sensor is not None:
+        raise ValueError(
+            f"{p}: --robot and --sensor pick the scans of an agvsim recording (.mcap); "
+            "this log holds one laser"
+        )
     for ending, reader in READERS.items():
         if name.endswith(ending):
             return reader(p)
@@ -85,12 +93,15 @@ def run_offline(
     config: SlamConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
     max_scans: int | None = None,
+    robot: str | None = None,
+    sensor: str | None = None,
 ) -> OfflineResult:
     """Run SLAM over a log and write ``trajectory.txt``, ``map.pgm``, ``map.yaml``, ``map.png``
     into ``out_dir`` (created). ``progress(done, total)`` is called every 100 scans and at the
-    end; ``max_scans`` stops early (a slice of the log)."""
+    end; ``max_scans`` stops early (a slice of the log); ``robot`` / ``sensor`` pick the lidar
+    of an agvsim recording (default: the first robot with one)."""
     t0 = time.perf_counter()
-    log = open_log(log_path)
+    log = open_log(log_path, robot, sensor)
     total = len(log) if max_scans is None else min(len(log), max_scans)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
