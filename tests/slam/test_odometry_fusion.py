@@ -70,3 +70,15 @@ def test_fused_track_follows_the_better_source() -> None:
         return float(np.hypot(*d.T).mean())
 
     assert jitter(fused) < 0.2 * jitter(matches)
+
+
+def test_standing_still_teaches_nothing() -> None:
+    fusion = OdometryFusion(window=300, lag=10)
+    pose = np.array([1.0, 2.0, 0.3])
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        # until the noises are known the pose is odometry's, whatever the match says
+        match = pose + rng.normal(0, 0.003, 3)
+        assert np.array_equal(fusion.fuse(pose, match, np.eye(3)), pose)
+        fusion.add(pose)
+    assert not fusion.ready() and fusion.odometry_variance() is None

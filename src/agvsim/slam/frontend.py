@@ -191,12 +191,14 @@ class OdometryFusion:
     moved towards the match by the gain ``s_o^2 / (s_o^2 + s_m^2)``. That is deliberately
     more trusting of odometry than the steady-state Kalman gain for white match noise (about
     ``sqrt(s_o^2 / s_m^2)``): errors of matches against one submap are correlated from scan to
-    scan, and the thesis maze's map IoU fell from 0.97 to 0.89 with the Kalman gain (four
-    recorded runs, mean). For
-    translation ``s_m^2``
-    is scaled per direction by how sharply the match is constrained there (the eigenvalues of
-    its ``J^T J``, against their typical value), so along a corridor odometry carries the pose.
-    A robot with good wheel odometry keeps it; one whose odometry slips follows its scans."""
+    scan, and the thesis maze's map IoU fell from 0.97 to 0.89 with the Kalman gain (mean of
+    four recorded runs). For translation ``s_m^2`` is scaled per direction by how sharply the
+    match is constrained there (the eigenvalues of its ``J^T J``, against their typical value),
+    so along a corridor odometry carries the pose.
+    A robot with good wheel odometry keeps it; one whose odometry slips follows its scans.
+
+    Until it is :meth:`ready`, the pose is odometry's alone (and :class:`~.graph_slam.GraphSlam`
+    processes those first scans again with the learnt noises, :meth:`preset`)."""
 
     def __init__(self, window: int, lag: int) -> None:
         self.window, self.lag = window, lag
@@ -215,11 +217,11 @@ class OdometryFusion:
         w, v = np.linalg.eigh(hessian[:2, :2])
         w = np.maximum(w, 0.0)
         self.sharp.append(float(math.sqrt(w[0] * w[1])))
-        if not self.ready(final=True) and not self._preset:
+        if not self.ready() and not self._preset:
             # learning the noises: odometry alone builds the map, so that the matches against
             # it show odometry's drift (GraphSlam then processes these scans again)
             return guess.copy()
-        if self.ready(final=True) and self._count % 10 == 0:
+        if self.ready() and self._count % 10 == 0:
             self._k = self.estimate()
         s_o, s_m, k_rot, _ = self._k
         ref = float(np.median(self.sharp))
@@ -230,16 +232,16 @@ class OdometryFusion:
         out[2] = guess[2] + k_rot * _wrap(match[2] - guess[2])
         return out
 
-    def ready(self, final: bool) -> bool:
-        """Enough scans to estimate the noises (``final``: enough to trust over a preset)."""
-        return len(self.matches) >= self.lag + (30 if final else 8)
+    def ready(self) -> bool:
+        """Enough scans taken on the move to estimate the noises."""
+        return len(self.matches) >= self.lag + 30
 
     def preset(self, k: tuple[float, float, float, float]) -> None:
         """Start from noises learnt earlier (see :meth:`estimate`) until enough scans come."""
         self._k, self._preset = k, True
 
     def odometry_variance(self) -> tuple[float, float] | None:
-        if not (self._preset or self.ready(final=True)):
+        if not (self._preset or self.ready()):
             return None
         return self._k[0], self._k[3]
 

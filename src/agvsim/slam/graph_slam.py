@@ -140,24 +140,22 @@ class GraphSlam:
         scan matches are learnt from them (matches against a map odometry built show its
         drift); once enough scans taken on the move are in, they are processed again with the
         two fused (their poses and the first submaps are replaced)."""
-        if self._warmup is not None:
-            fusion = self.tracker.fusion
-            learnt = fusion is not None and fusion.ready(final=True)
-            if learnt or len(self._warmup) >= _MAX_WARMUP_SCANS:
+        fusion = self.tracker.fusion
+        if self._warmup is not None and fusion is not None:
+            if fusion.ready() or len(self._warmup) >= _MAX_WARMUP_SCANS:
                 scans, self._warmup = self._warmup, None
-                for _ in range(_WARMUP_PASSES if learnt else 0):
+                for _ in range(_WARMUP_PASSES):
                     # each pass tracks with the noises the one before learnt (the first pass
                     # had odometry alone, which hides part of a drifting odometry's error)
-                    if fusion is None or not fusion.ready(final=True):
+                    if fusion is None or not fusion.ready():
                         break
                     noises = fusion.estimate()
                     self._reset()
                     fusion = self.tracker.fusion
-                    if fusion is None:
-                        break
-                    fusion.preset(noises)
-                    for args in scans:
-                        self._step(*args)
+                    if fusion is not None:
+                        fusion.preset(noises)
+                        for args in scans:
+                            self._step(*args)
             else:
                 self._warmup.append((timestamp, ranges, angles, odom_pose))
         return self._step(timestamp, ranges, angles, odom_pose)
