@@ -200,3 +200,14 @@ def test_rotation_matrices_become_the_same_quaternions(yaw, tilt):
     r = np.column_stack([shapes.rotate(q, e) for e in np.eye(3)])
     got = shapes._quat_of(r)
     assert got == pytest.approx(q * np.sign(q @ got), abs=1e-12)
+
+
+def test_map_overlay_colours_do_not_wrap_around() -> None:
+    from agvsim.app.scene import overlay_rgb
+
+    rgb = overlay_rgb(np.array([[0.0, 0.5, 1.0, 1.7, -0.3]]))
+    assert rgb.dtype == np.uint8
+    assert rgb[0, 0].tolist() == [30, 30, 30]  # a wall: near black
+    assert rgb[0, 1].tolist() == [90, 130, 142]  # unknown: grey-blue (30 + 0.5 x colour)
+    assert rgb[0, 2].tolist() == [150, 230, 255]  # free: light blue, not wrapped past 255
+    assert rgb[0, 3].tolist() == rgb[0, 2].tolist() and rgb[0, 4].tolist() == [30, 30, 30]

@@ -14,6 +14,7 @@ from agvsim.viz.topview import (
     FLOOR_RGB,
     HEADING_RGB,
     HIT_RGB,
+    TAG_RGB,
     WALL_RGB,
     View,
     draw_segments,
@@ -21,12 +22,14 @@ from agvsim.viz.topview import (
     render_top,
 )
 from agvsim.world.grid import OccupancyGrid
+from agvsim.world.markers import Appearance, Face, MarkerKind, MarkerSpec, place_markers
 
 
-def _sim(sensors=(), pose=(0.0, 0.0, 0.0), color="#0000ff") -> Simulation:
+def _sim(sensors=(), pose=(0.0, 0.0, 0.0), color="#0000ff", markers=()) -> Simulation:
     m = np.zeros((4, 4), dtype=int)
     m[0, 0] = 1  # the north-west cell: x in [-2, -1), y in [1, 2)
     grid = OccupancyGrid.from_matrix(m, 1.0)  # spans [-2, 2] x [-2, 2]
+    appearance = Appearance(markers=place_markers(markers, grid, 2.0))
     spec = RobotSpec(
         "r",
         DifferentialDrive(),
@@ -37,7 +40,7 @@ def _sim(sensors=(), pose=(0.0, 0.0, 0.0), color="#0000ff") -> Simulation:
         odometry=OdometrySpec(wheel_noise_rel=0.0),
         color=color,
     )
-    return Simulation(World(grid), [spec])
+    return Simulation(World(grid, appearance=appearance), [spec])
 
 
 def _rgb(img, row, col):
@@ -129,3 +132,43 @@ def test_render_follows_a_changed_grid_and_trails():
     # the trail runs along row 25 from col 5 to col 25 in the robot's colour, blended
     assert _rgb(img, 25, 10) not in (FLOOR_RGB,)
     assert _rgb(img, 20, 10) == FLOOR_RGB
+
+
+PATCH_RGB = (255, 128, 0)
+# on the wall cell (0, 0): a 0.3 m patch on its east face (x = -1), 0.25 m to the right of the
+# face's middle seen from the front (north), so y in [1.6, 1.9]; an ArUco 4x4 code of 0.45 m on
+# its south face (y = 1): 6 modules + 1 quiet module each side print 0.6 m, x in [-1.8, -1.2]
+EAST_PATCH = MarkerSpec(
+    MarkerKind.PATCH, Face.EAST, 0.3, 1.0, cell=(0, 0), offset_m=0.25, rgb=PATCH_RGB
+)
+SOUTH_TAG = MarkerSpec(MarkerKind.ARUCO, Face.SOUTH, 0.45, 1.0, cell=(0, 0), marker_id=3)
+
+
+def _where(img, rgb):
+    return {(int(r), int(c)) for r, c in zip(*np.nonzero(np.all(img == rgb, axis=-1)), strict=True)}
+
+
+def test_markers_are_strips_on_the_floor_along_their_faces():
+    sim = _sim(pose=(1.0, -1.0, 0.0), markers=[EAST_PATCH, SOUTH_TAG])
+    img = render_top(sim, 40, beams=False)  # 10 px per metre: col = 10 (x + 2), row = 10 (2 - y)
+    # patch: y in [1.6, 1.9] -> rows [1, 4); 2 px (the minimum depth) east of x = -1 (col 10)
+    assert _where(img, PATCH_RGB) == {(r, c) for r in (1, 2, 3) for c in (10, 11)}
+    # tag, drawn magenta: x in [-1.8, -1.2] -> cols [2, 8); 2 px south of y = 1 (row 10)
+    assert _where(img, TAG_RGB) == {(r, c) for r in (10, 11) for c in range(2, 8)}
+    # the wall itself is untouched, and the floor around the strips too
+    assert np.all(img[:10, :10] == WALL_RGB)
+    assert _rgb(img, 0, 10) == FLOOR_RGB and _rgb(img, 4, 10) == FLOOR_RGB
+    assert _rgb(img, 1, 12) == FLOOR_RGB and _rgb(img, 12, 5) == FLOOR_RGB
+
+
+def test_marker_strip_depth_follows_the_scale_and_hides_under_new_walls():
+    sim = _sim(pose=(1.0, -1.0, 0.0), markers=[EAST_PATCH])
+    img = render_top(sim, 400, beams=False)  # 100 px per metre: 0.08 m deep = 8 px
+    assert _where(img, PATCH_RGB) == {(r, c) for r in range(10, 40) for c in range(100, 108)}
+    # a view that leaves the marker out shows none of it
+    part = render_top(sim, 40, beams=False, extent=(0.0, 2.0, -2.0, 0.0))
+    assert not np.any(np.all(part == PATCH_RGB, axis=-1))
+    # the floor in front of the patch becomes a wall: the strip is not drawn over it
+    sim.set_grid(sim.world.grid.with_cell(0, 1, True))
+    img = render_top(sim, 400, beams=False)
+    assert not np.any(np.all(img == PATCH_RGB, axis=-1))

@@ -44,6 +44,13 @@ class _RobotNodes:
     label: Any
 
 
+def overlay_rgb(free: np.ndarray) -> np.ndarray:
+    """Colours of a map overlay: ``free`` 0 (occupied) .. 1 (free) from near-black through
+    grey-blue (0.5, unknown) to light blue, as uint8 RGB."""
+    f = np.clip(np.asarray(free, np.float64), 0.0, 1.0)[..., None]
+    return np.rint(30.0 + f * np.array([120.0, 200.0, 225.0])).astype(np.uint8)
+
+
 class SceneView:
     """Draws ``session`` into ``server``'s scene; call ``update()`` every frame."""
 
@@ -209,7 +216,7 @@ class SceneView:
             g = self.session.sim.world.grid
             img = np.where(g.occupied, 0.0, 1.0)
             res, origin = g.resolution_m, g.origin_xy_m
-        rgb = (np.clip(img, 0, 1)[..., None] * np.array([120, 200, 255]) + 30).astype(np.uint8)
+        rgb = overlay_rgb(img)
         h, w = img.shape
         self._overlay_node = self.server.scene.add_image(
             "/overlay",

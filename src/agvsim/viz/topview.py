@@ -1,11 +1,12 @@
 """A fast top (plan) view of a simulation as an RGB image, drawn with NumPy only.
 
 ``render_top(sim)`` returns an ``(H, W, 3) uint8`` picture: the floor and the walls of the grid,
-the static boxes, every robot as its oriented footprint in its colour with a white heading mark,
-and optionally the sensor beams (rangers green, lidar blue, like the 3D app) with their hit
-points and the robots' trails. It is used for video export and for Gymnasium ``rgb_array``
-rendering, so it is built for speed: the background (grid and boxes) is drawn once per grid and
-cached; each frame copies it and draws a few small polygons and line samples.
+the markers on wall faces (each a thin strip on the floor along its face), the static boxes,
+every robot as its oriented footprint in its colour with a white heading mark, and optionally
+the sensor beams (rangers green, lidar blue, like the 3D app) with their hit points and the
+robots' trails. It is used for video export and for Gymnasium ``rgb_array`` rendering, so it is
+built for speed: the background (grid, markers and boxes) is drawn once per grid and cached;
+each frame copies it and draws a few small polygons and line samples.
 
 Image layout: row 0 is north (largest y), column 0 west (smallest x), as the maps are read.
 """
@@ -18,6 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from agvsim.world.markers import Marker, MarkerKind
+
 FLOOR_RGB = (236, 236, 232)
 WALL_RGB = (70, 70, 78)
 BOX_RGB = (110, 100, 90)
@@ -28,6 +31,11 @@ HIT_RGB = (230, 40, 40)
 TRAIL_RGB = (90, 90, 90)
 OUTLINE_RGB = (20, 20, 20)
 HEADING_RGB = (255, 255, 255)
+# ArUco, AprilTag and QR codes are black on white paper: black would merge with the dark wall the
+# strip touches and white with the pale floor, so they are drawn magenta, a colour nothing else
+# in the top view uses (colour patches are drawn in their own colour)
+TAG_RGB = (230, 0, 230)
+MARKER_DEPTH_M = 0.08  # how far a marker's strip reaches from its face onto the floor (>= 2 px)
 
 
 def hex_rgb(color: str) -> tuple[int, int, int]:
@@ -189,9 +197,33 @@ def box_corners(boxes: np.ndarray) -> np.ndarray:
     return np.stack([x, y], axis=-1)
 
 
+def marker_strips(markers: Sequence[Marker], view: View) -> tuple[np.ndarray, np.ndarray]:
+    """Where markers are drawn: ``boxes (M, 4)`` int64 pixel ranges ``row0, row1, col0, col1``
+    (half-open, may reach outside the image) and ``colors (M, 3)`` uint8.
+
+    A marker's strip spans its printed square along the face (quiet zone included) and reaches
+    ``MARKER_DEPTH_M`` (at least 2 px) from the face onto the free side; a pixel is in it when its
+    centre is in the half-open strip, so the strip is exactly that many pixels thick."""
+    boxes = np.zeros((len(markers), 4), dtype=np.int64)
+    colors = np.zeros((len(markers), 3), dtype=np.uint8)
+    depth_m = max(2, round(MARKER_DEPTH_M * view.px_per_m)) / view.px_per_m
+    for k, mk in enumerate(markers):
+        c = np.asarray(mk.center_xyz_m[:2], dtype=np.float64)
+        half = 0.5 * mk.extent_m * np.asarray(mk.right_xy)
+        normal = np.asarray(mk.normal_xy)
+        px = view.to_px(np.array([c - half, c + half + depth_m * normal]))  # opposite corners
+        (c0, r0), (c1, r1) = px.min(axis=0), px.max(axis=0)
+        boxes[k] = np.ceil(np.array([r0, r1, c0, c1]) - 0.5 - 1e-9)
+        colors[k] = mk.rgb if mk.kind == MarkerKind.PATCH else TAG_RGB
+    return boxes, colors
+
+
 # ---------------------------------------------------------------------- the renderer
-def render_background(grid, boxes: np.ndarray, view: View) -> np.ndarray:
-    """The static picture: floor, walls (nearest cell per pixel centre), outside and boxes."""
+def render_background(
+    grid, boxes: np.ndarray, view: View, markers: Sequence[Marker] = ()
+) -> np.ndarray:
+    """The static picture: floor, walls (nearest cell per pixel centre), outside, the markers'
+    strips (on floor pixels only) and boxes."""
     xs = view.xmin + (np.arange(view.width_px) + 0.5) / view.px_per_m
     ys = view.ymax - (np.arange(view.height_px) + 0.5) / view.px_per_m
     ox, oy = grid.origin_xy_m
@@ -203,15 +235,21 @@ def render_background(grid, boxes: np.ndarray, view: View) -> np.ndarray:
     inside = rin[:, None] & cin[None, :]
     img = np.empty((view.height_px, view.width_px, 3), dtype=np.uint8)
     img[:] = OUTSIDE_RGB
-    img[inside & ~occ] = FLOOR_RGB
+    floor = inside & ~occ
+    img[floor] = FLOOR_RGB
     img[inside & occ] = WALL_RGB
+    strips, colors = marker_strips(markers, view)
+    for box, rgb in zip(np.maximum(strips, 0), colors, strict=True):  # no negative slice ends
+        r0, r1, c0, c1 = box
+        img[r0:r1, c0:c1][floor[r0:r1, c0:c1]] = rgb
     for corners in box_corners(boxes):
         fill_polygon(img, view.to_px(corners), BOX_RGB)
     return img
 
 
 class TopView:
-    """A renderer bound to one image size; caches the background until the grid changes.
+    """A renderer bound to one image size; caches the background until the grid, the boxes or
+    the markers change.
 
     ``extent`` (xmin, xmax, ymin, ymax) defaults to the map's extent."""
 
@@ -228,12 +266,14 @@ class TopView:
 
     def _background(self, sim) -> np.ndarray:
         grid, boxes = sim.world.grid, sim.world.boxes
-        key = (id(grid), id(boxes), len(boxes))
+        markers = sim.world.appearance.markers
+        key = (id(grid), id(boxes), len(boxes), id(markers))
         if self._key != key or self._bg is None:
             self.view = View.fit(self.extent or grid.extent_m, self.width_px, self.height_px)
-            self._bg = render_background(grid, boxes, self.view)
+            self._bg = render_background(grid, boxes, self.view, markers)
             self._key = key
-            self._grid = grid  # keep it alive, so its id cannot be reused while cached
+            # keep them alive, so their ids cannot be reused while cached
+            self._grid, self._boxes, self._markers = grid, boxes, markers
         return self._bg
 
     def render(
