@@ -7,17 +7,14 @@ are skipped, unless AGVSIM_REQUIRE_BROWSER=1 (CI sets it), which turns the skip 
 from __future__ import annotations
 
 import io
-import os
-import shutil
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from agvsim.bench_app import FLAGS, free_port
 
-CHROMIUM = "/usr/bin/chromium"
+from helpers import CHROMIUM, need_browser, wait_for
+
 ROOM = """\
 name: room
 world:
@@ -41,24 +38,9 @@ robots:
 """
 
 
-def _need_browser() -> None:
-    missing = []
-    if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
-        missing.append("Debian's chromium (apt-get install -y chromium)")
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        missing.append("playwright (pip install -e '.[test]')")
-    if missing:
-        why = "browser tests need " + " and ".join(missing)
-        if os.environ.get("AGVSIM_REQUIRE_BROWSER") == "1":
-            pytest.fail(why)
-        pytest.skip(why)
-
-
 @pytest.fixture(scope="module")
 def app(tmp_path_factory):
-    _need_browser()
+    need_browser()
     from agvsim.app.server import App, open_session
 
     path = tmp_path_factory.mktemp("app") / "room.yaml"
@@ -93,15 +75,6 @@ def page(app):
         browser.close()
 
 
-def wait_for(cond, timeout_s: float = 15.0, what: str = "condition") -> None:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        if cond():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
 def canvas_shot(page) -> np.ndarray:
     from PIL import Image
 
@@ -118,6 +91,16 @@ def canvas_shot(page) -> np.ndarray:
 def choose(page, label: str, option: str) -> None:
     page.get_by_label(label).first.click()
     page.get_by_role("option", name=option, exact=True).click()
+
+
+def apply_robot_field(page, label: str, value: str) -> None:
+    """Type ``value`` into the Robot tab's field ``label`` and press Apply."""
+    page.get_by_role("tab", name="Robot").click()
+    field = page.get_by_label(label)
+    field.fill(value)
+    field.press("Enter")
+    page.wait_for_timeout(300)
+    page.get_by_role("button", name="Apply").click()
 
 
 def test_page_loads_without_errors_and_draws_the_scene(app, page):
@@ -147,12 +130,7 @@ def test_play_moves_the_robot(app, page):
 def test_wheel_radius_in_the_panel_changes_the_motion(app, page):
     page.get_by_role("tab", name="Run").click()
     page.get_by_role("button", name="Reset").click()
-    page.get_by_role("tab", name="Robot").click()
-    field = page.get_by_label("wheel_radius_m")
-    field.fill("0.05")
-    field.press("Enter")
-    page.wait_for_timeout(300)
-    page.get_by_role("button", name="Apply").click()
+    apply_robot_field(page, "wheel_radius_m", "0.05")
     wait_for(
         lambda: app.session.robot_config("agv").get("params", {}).get("wheel_radius_m") == 0.05,
         what="the new wheel radius",
@@ -163,12 +141,7 @@ def test_wheel_radius_in_the_panel_changes_the_motion(app, page):
     page.get_by_role("button", name="Pause").click()
     assert app.session.sim.state.twists[0, 0] == pytest.approx(5.0 * 0.05)
     # an invalid value is refused in the panel with the schema's message
-    page.get_by_role("tab", name="Robot").click()
-    field = page.get_by_label("body length (m)")
-    field.fill("-1")
-    field.press("Enter")
-    page.wait_for_timeout(300)
-    page.get_by_role("button", name="Apply").click()
+    apply_robot_field(page, "body length (m)", "-1")
     page.get_by_text("greater than 0").wait_for(timeout=5000)
     assert app.session.robot_config("agv")["body"].get("length_m", 0.6) > 0
     assert page.errors == []

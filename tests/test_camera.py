@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -22,23 +21,18 @@ from agvsim.world.grid import OccupancyGrid
 from agvsim.world.markers import Appearance
 from agvsim.world.mazes import thesis_maze
 
+from helpers import walled_room
+
 WALL, FLOOR, SKY = (175, 175, 185), (225, 225, 215), (200, 220, 240)
 FLAT = Appearance(shade_faces=False, floor_checker=False)
 
 
-@pytest.fixture(autouse=True)
-def one_numba_thread():
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_numba_thread")  # from conftest.py
 
 
-def room(rows: int = 9, cols: int = 7) -> OccupancyGrid:
-    """A walled room, origin (0, 0): free x in [1, cols - 1], y in [1, rows - 1]."""
-    m = np.zeros((rows, cols), dtype=int)
-    m[0, :] = m[-1, :] = m[:, 0] = m[:, -1] = 1
-    return OccupancyGrid.from_matrix(m, 1.0, (0.0, 0.0))
+def room() -> OccupancyGrid:
+    """A walled room of 9 x 7 cells, origin (0, 0): free x in [1, 6], y in [1, 8]."""
+    return walled_room(rows=9, cols=7)
 
 
 def robot(name="a", pose=(2.0, 4.5, 0.0), cameras=(), color="#d62728", **kw) -> RobotSpec:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 
 import cv2
-import numba
 import numpy as np
 import pytest
 
@@ -26,20 +25,14 @@ from agvsim.world.markers import (
     place_markers,
 )
 
+from helpers import walled_room
 
-@pytest.fixture(autouse=True)
-def one_numba_thread():
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_numba_thread")  # from conftest.py
 
 
-def room(rows: int = 9, cols: int = 9) -> OccupancyGrid:
-    """Walled room, origin (0, 0): free x in [1, cols - 1], y in [1, rows - 1]."""
-    m = np.zeros((rows, cols), dtype=int)
-    m[0, :] = m[-1, :] = m[:, 0] = m[:, -1] = 1
-    return OccupancyGrid.from_matrix(m, 1.0, (0.0, 0.0))
+def room() -> OccupancyGrid:
+    """Walled room of 9 x 9 cells, origin (0, 0): free x in [1, 8], y in [1, 8]."""
+    return walled_room(rows=9, cols=9)
 
 
 def snap(markers, pose, boxes=(), spec: CameraSpec | None = None, grid=None):

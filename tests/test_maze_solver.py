@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numba
 import numpy as np
 import pytest
 import yaml
@@ -32,16 +31,6 @@ from agvsim.world.mazes import random_maze
 
 ALL_MODELS = ["differential", "tricycle", "ackermann", "mecanum", "omni3"]
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
-
-
-@pytest.fixture
-def one_numba_thread():
-    """One ray-casting thread: with a single sensor the parallel kernel only adds thread
-    wake-up latency (milliseconds per step on a busy 2-core machine)."""
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(before)
 
 
 def room_center(grid: OccupancyGrid, i: int, j: int, corridor: int = 2, wall: int = 1):

@@ -81,17 +81,24 @@ def _run_until(proc, t_min: float) -> float:
     raise AssertionError(f"the child stopped early (exit {proc.wait()}):\n{err}")
 
 
-def test_killed_run_leaves_a_readable_recording(tmp_path):
-    proc, scen, out = _start(tmp_path)
+def _signal_at(proc, t_min: float, sig: signal.Signals, timeout_s: float) -> float:
+    """Let the child run past simulated time ``t_min``, send it ``sig`` and wait for it to
+    end (killing it if it does not); returns the time it had reached."""
     try:
-        t_seen = _run_until(proc, 4.0)
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=30)
+        t_seen = _run_until(proc, t_min)
+        proc.send_signal(sig)
+        proc.wait(timeout=timeout_s)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
         proc.stdout.close()
+    return t_seen
+
+
+def test_killed_run_leaves_a_readable_recording(tmp_path):
+    proc, scen, out = _start(tmp_path)
+    t_seen = _signal_at(proc, 4.0, signal.SIGKILL, timeout_s=30)
     path = out / "run.mcap"
     assert not (out / "summary.json").exists()  # it really died before writing the end
     # the file ends in a (provisional) footer: rosbags reads it as it is, no repair needed
@@ -116,15 +123,7 @@ def test_killed_run_leaves_a_readable_recording(tmp_path):
 
 def test_interrupted_run_closes_the_recording(tmp_path):
     proc, _, out = _start(tmp_path)
-    try:
-        _run_until(proc, 2.0)
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
+    _signal_at(proc, 2.0, signal.SIGINT, timeout_s=60)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["run"]["status"] == "interrupted"
     path = out / "run.mcap"

@@ -7,17 +7,13 @@ Skipped without Debian's chromium, unless AGVSIM_REQUIRE_BROWSER=1 (as tests/tes
 from __future__ import annotations
 
 import io
-import os
-import shutil
-import time
-from pathlib import Path
 
 import numpy as np
-import pytest
 
 from agvsim.bench_app import FLAGS, free_port
 
-CHROMIUM = "/usr/bin/chromium"
+from helpers import CHROMIUM, need_browser, wait_for
+
 ROOM = {
     "name": "replay room",
     "world": {"picture": "#########\n#.......#\n#.......#\n#.......#\n#########"},
@@ -35,32 +31,8 @@ ROOM = {
 }
 
 
-def _need_browser() -> None:
-    missing = []
-    if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
-        missing.append("Debian's chromium")
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        missing.append("playwright")
-    if missing:
-        why = "browser tests need " + " and ".join(missing)
-        if os.environ.get("AGVSIM_REQUIRE_BROWSER") == "1":
-            pytest.fail(why)
-        pytest.skip(why)
-
-
-def _wait(cond, timeout_s: float = 15.0, what: str = "condition") -> None:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        if cond():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
 def test_replay_page_plays_the_recording(tmp_path):
-    _need_browser()
+    need_browser()
     from PIL import Image
     from playwright.sync_api import sync_playwright
 
@@ -86,9 +58,9 @@ def test_replay_page_plays_the_recording(tmp_path):
             red = (img[..., 0] > 180) & (img[..., 1] < 90) & (img[..., 2] < 90)
             assert red.sum() > 30, "the red robot is not drawn"
             page.get_by_role("button", name="Play").click()
-            _wait(lambda: session.t_s > 0.5, what="playback to advance")
+            wait_for(lambda: session.t_s > 0.5, what="playback to advance")
             page.get_by_role("button", name="Pause").click()
-            _wait(lambda: not session.playing, what="pause")
+            wait_for(lambda: not session.playing, what="pause")
             t = session.t_s
             page.wait_for_timeout(400)
             assert session.t_s == t  # paused

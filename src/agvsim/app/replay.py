@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from agvsim.app.server import run_until_stopped
 from agvsim.record.mcap_reader import Recording, RecordingError
 from agvsim.record.ros2msg import topic_name
 
@@ -278,9 +280,10 @@ def replay(
     port: int = 8080,
     speed: float = 1.0,
     play: bool = True,
-    on_ready: Any = None,
+    on_ready: Callable[[ReplayApp], None] | None = None,
 ) -> None:
-    """Serve the player until Ctrl-C; ``on_ready(app)`` is called once it listens."""
+    """Serve the player until Ctrl-C (or SIGTERM); ``on_ready(app)`` is called once it
+    listens."""
     if not speed > 0:
         raise ValueError(f"replay speed must be > 0, got {speed}")
     session = ReplaySession(path)
@@ -288,12 +291,4 @@ def replay(
     app = ReplayApp(session, host, port).start()
     if play:
         session.play()
-    if on_ready is not None:
-        on_ready(app)
-    try:
-        while True:
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        app.stop()
+    run_until_stopped(app, on_ready)

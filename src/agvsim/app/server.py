@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 from agvsim.app.session import DEFAULT_OUT, Session
 from agvsim.scenario import Scenario, load_scenario
@@ -187,6 +187,20 @@ def serve(
     app = App(open_session(scenario, out_dir), host=host, port=port, notify=notify).start()
     if play:
         app.session.play()
+    run_until_stopped(app, on_ready)
+
+
+class _Stoppable(Protocol):
+    def stop(self) -> None: ...
+
+
+_AppT = TypeVar("_AppT", bound=_Stoppable)
+
+
+def run_until_stopped(app: _AppT, on_ready: Callable[[_AppT], None] | None = None) -> None:
+    """The serve loop of ``agvsim serve`` and ``agvsim replay``: call ``on_ready(app)`` (the
+    app is started and listening), wait until Ctrl-C or SIGTERM, then ``app.stop()``, which
+    finishes what must be finished (a video being recorded) and closes the server."""
     if on_ready is not None:
         on_ready(app)
     previous = _stop_on_sigterm()

@@ -1,0 +1,54 @@
+"""Builders and waits shared by several test modules (shared fixtures are in ``conftest.py``).
+
+Import them as ``from helpers import ...``: pytest puts this folder on ``sys.path``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agvsim.world.grid import OccupancyGrid
+
+CHROMIUM = "/usr/bin/chromium"
+
+
+def walled_room(rows: int, cols: int) -> OccupancyGrid:
+    """A walled room of ``rows`` x ``cols`` 1 m cells, origin (0, 0): free x in
+    [1, cols - 1], y in [1, rows - 1]."""
+    m = np.zeros((rows, cols), dtype=int)
+    m[0, :] = m[-1, :] = m[:, 0] = m[:, -1] = 1
+    return OccupancyGrid.from_matrix(m, 1.0, (0.0, 0.0))
+
+
+def need_browser() -> None:
+    """Skip the test without Debian's chromium and playwright; fail it instead when
+    AGVSIM_REQUIRE_BROWSER=1 (CI sets it)."""
+    missing = []
+    if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
+        missing.append("Debian's chromium (apt-get install -y chromium)")
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        missing.append("playwright (pip install -e '.[test]')")
+    if missing:
+        why = "browser tests need " + " and ".join(missing)
+        if os.environ.get("AGVSIM_REQUIRE_BROWSER") == "1":
+            pytest.fail(why)
+        pytest.skip(why)
+
+
+def wait_for(cond: Callable[[], object], timeout_s: float = 15.0, what: str = "condition") -> None:
+    """Poll ``cond`` every 50 ms until it is true; fail after ``timeout_s`` seconds."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        if cond():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
