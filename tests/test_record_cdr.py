@@ -154,6 +154,42 @@ def test_occupancy_grid_image_and_string_bytes_equal_rosbags():
     )
 
 
+def _camera_info_ref(t_ns: int, frame: str, w: int, h: int, k: np.ndarray):
+    roi = T["sensor_msgs/msg/RegionOfInterest"](
+        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+    )
+    return T["sensor_msgs/msg/CameraInfo"](
+        header=_hdr(t_ns, frame),
+        height=h,
+        width=w,
+        distortion_model="plumb_bob",
+        d=np.zeros(5),
+        k=k.ravel(),
+        r=np.eye(3).ravel(),
+        p=np.column_stack([k, np.zeros(3)]).ravel(),
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+    )
+
+
+@pytest.mark.parametrize("frame", ["", "r", "a/cam_optical", "robot_1/front_optical"])
+def test_camera_info_bytes_equal_rosbags_for_every_string_padding(frame):
+    from agvsim.sensors.camera import CameraSpec
+
+    spec = CameraSpec(width_px=64, height_px=48, hfov_rad=np.deg2rad(75.0))
+    t = 2_100_000_000
+    ours = R.encode_camera_info(t, frame, 64, 48, spec.K)
+    assert ours == bytes(
+        TS.serialize_cdr(_camera_info_ref(t, frame, 64, 48, spec.K), R.CAMERA_INFO)
+    )
+    enc = R.CameraInfoEncoder(frame, 64, 48, spec.K)  # the template: only the stamp changes
+    for t_ns in (0, t, 59_980_000_000):
+        assert enc.encode(t_ns) == R.encode_camera_info(t_ns, frame, 64, 48, spec.K)
+    with pytest.raises(ValueError, match=r"K must be a \(3, 3\) camera matrix"):
+        R.encode_camera_info(t, frame, 64, 48, np.eye(4))
+
+
 @pytest.mark.parametrize("type_name", R.TYPES)
 def test_schema_texts_define_the_standard_fields(type_name):
     parsed = get_types_from_msg(R.schema_text(type_name), type_name)
@@ -246,12 +282,14 @@ def test_every_type_decodes_with_mcap_ros2_as_foxglove_would(tmp_path):
     mcap_ros2 = pytest.importorskip("mcap_ros2.decoder")
     from mcap.reader import make_reader
 
+    K = np.array([[32.0, 0.0, 31.5], [0.0, 32.0, 23.5], [0.0, 0.0, 1.0]])
     samples = {
         R.ODOMETRY: R.encode_odometry(1, "o", "b", (1.5, 2.0, 0.5), (0.1, 0.2, 0.3)),
         R.TF_MESSAGE: R.encode_tf(1, [("map", "o", 1.0, 2.0, 0.5)]),
         R.LASER_SCAN: R.encode_laser_scan(1, "l", -1.0, 0.5, 0.0, 5.0, 0.1, np.array([1.0, 2])),
         R.OCCUPANCY_GRID: R.encode_occupancy_grid(1, "map", np.array([[0, 100]]), 0.5, (1, 2)),
         R.COMPRESSED_IMAGE: R.encode_compressed_image(1, "c", "jpeg", b"xyz"),
+        R.CAMERA_INFO: R.encode_camera_info(1, "c_optical", 64, 48, K),
         R.STRING: R.encode_string("drive"),
     }
     p = tmp_path / "all.mcap"
@@ -270,6 +308,11 @@ def test_every_type_decodes_with_mcap_ros2_as_foxglove_would(tmp_path):
     assert list(got[R.OCCUPANCY_GRID].data) == [0, 100]
     assert got[R.OCCUPANCY_GRID].info.origin.position.y == 2.0
     assert bytes(got[R.COMPRESSED_IMAGE].data) == b"xyz"
+    info = got[R.CAMERA_INFO]
+    assert (info.width, info.height, info.distortion_model) == (64, 48, "plumb_bob")
+    assert list(info.k) == K.ravel().tolist() and list(info.d) == [0.0] * 5
+    assert list(info.p) == [32.0, 0.0, 31.5, 0.0, 0.0, 32.0, 23.5, 0.0, 0.0, 0.0, 1.0, 0.0]
+    assert info.roi.do_rectify is False and info.header.frame_id == "c_optical"
     assert got[R.STRING].data == "drive"
 
 

@@ -1,5 +1,6 @@
 """Every topic of a recording survives a round trip through rosbags: the values read back are
-the simulation's own arrays (poses, twists, odometry, scans, grid cells, states, images)."""
+the simulation's own arrays (poses, twists, odometry, scans, grid cells, states, images and
+their camera info)."""
 
 from __future__ import annotations
 
@@ -419,6 +420,28 @@ def _matrix(q) -> np.ndarray:
     return Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
 
 
+def _optical_in_base(static, cam: str) -> tuple[np.ndarray, np.ndarray]:
+    """(t (3,), R (3, 3)) of ``<cam>_optical`` in ``<robot>/base_link``, composed from the
+    ``/tf_static`` message: base_link -> ``<cam>`` -> ``<cam>_optical``."""
+    tr = {t.child_frame_id: t.transform for t in static.transforms}
+    cam_tf, opt_tf = tr[cam], tr[f"{cam}_optical"]
+    r_cam = _matrix(cam_tf.rotation)
+    t_cam = np.array([cam_tf.translation.x, cam_tf.translation.y, cam_tf.translation.z])
+    t_opt = np.array([opt_tf.translation.x, opt_tf.translation.y, opt_tf.translation.z])
+    return t_cam + r_cam @ t_opt, r_cam @ _matrix(opt_tf.rotation)
+
+
+def _project(K, t_opt, r_opt, base_pose, pts_world) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (n, 2) and z-depths (n,) of world points (n, 3) through a planar base_link pose
+    (x, y, theta), the optical frame's pose in base_link (``_optical_in_base``) and ``K``."""
+    x0, y0, th = base_pose
+    c, s = np.cos(th), np.sin(th)
+    d = np.asarray(pts_world, dtype=np.float64) - (x0, y0, 0.0)
+    pts_base = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+    p_opt = (pts_base - t_opt) @ r_opt  # R^T (p - t), row by row
+    return (p_opt @ np.asarray(K).T)[:, :2] / p_opt[:, 2:3], p_opt[:, 2]
+
+
 def test_a_pitched_camera_mount_is_a_3d_transform_with_an_optical_child(tmp_path):
     from agvsim.sensors.camera import project_points
 
@@ -458,7 +481,8 @@ def test_a_pitched_camera_mount_is_a_3d_transform_with_an_optical_child(tmp_path
     # the camera's axes in base_link: x forward = (cos 30 cos 90, cos 30 sin 90, -sin 30);
     # the optical frame: z along it, x right (yawed 90 deg: base +x), y down
     r_cam = _matrix(cam.transform.rotation)
-    r_opt = r_cam @ _matrix(opt.transform.rotation)
+    t_opt, r_opt = _optical_in_base(static, "a/cam")
+    assert t_opt == pytest.approx((0.3, -0.1, 0.45), abs=1e-12)
     assert r_cam[:, 0] == pytest.approx((0.0, np.sqrt(3) / 2, -0.5), abs=1e-12)
     assert r_opt[:, 2] == pytest.approx((0.0, np.sqrt(3) / 2, -0.5), abs=1e-12)
     assert r_opt[:, 0] == pytest.approx((1.0, 0.0, 0.0), abs=1e-12)
@@ -475,12 +499,11 @@ def test_a_pitched_camera_mount_is_a_3d_transform_with_an_optical_child(tmp_path
         [x0 + c * pts_base[:, 0] - s * pts_base[:, 1], y0 + s * pts_base[:, 0] + c * pts_base[:, 1],
          pts_base[:, 2]]
     )  # fmt: skip
-    p_opt = (pts_base - (0.3, -0.1, 0.45)) @ r_opt  # R^T (p - t), row by row
-    uv = (p_opt @ spec.K.T)[:, :2] / p_opt[:, 2:3]
+    uv, z = _project(spec.K, t_opt, r_opt, (x0, y0, th), pts_world)
     want, depth = project_points(spec, sim.state.poses[0], pts_world)
     assert np.all(depth > 0)
     assert uv == pytest.approx(want, abs=1e-9)
-    assert p_opt[:, 2] == pytest.approx(depth, abs=1e-12)
+    assert z == pytest.approx(depth, abs=1e-12)
 
 
 def test_occupancy_hook_checks_its_input(tmp_path):
@@ -494,3 +517,116 @@ def test_occupancy_hook_checks_its_input(tmp_path):
     rec.close()
     ((_, m),) = _read(tmp_path / "o.mcap")["/x"]
     np.testing.assert_array_equal(np.asarray(m.data), [0, 0, 100, -1])  # south row first
+
+
+def _pixel_points(K, t_opt, r_opt, base_pose, depth) -> np.ndarray:
+    """World points (n, 3) of the pixel centres with a finite z-depth in ``depth`` (H, W): the
+    inverse of ``_project``, pixel (u, v) at z-depth d is d K^-1 (u, v, 1) in the optical frame."""
+    h, w = depth.shape
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    d = depth.ravel().astype(np.float64)
+    fin = np.isfinite(d)
+    rays = np.linalg.solve(K, np.stack([u.ravel()[fin], v.ravel()[fin], np.ones(fin.sum())]))
+    x0, y0, th = base_pose
+    c, s = np.cos(th), np.sin(th)
+    r_world_base = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    pts_base = (r_opt @ (rays * d[fin])).T + t_opt
+    return pts_base @ r_world_base.T + (x0, y0, 0.0)
+
+
+def test_camera_info_with_every_image_projects_onto_the_rendered_pixels(tmp_path):
+    """One CameraInfo per image (same stamp and frame), K and P as worked out by hand, and
+    /tf + /tf_static + K put world points on the pixels where the renderer draws them."""
+    from agvsim.sensors.camera import project_points
+    from agvsim.sim.spec import WALL_HEIGHT_M
+
+    data = json.loads(json.dumps(ROOM))
+    data["world"]["boxes"] = []  # every surface in view is the floor or a wall face on a grid line
+    data["robots"] = data["robots"][:1]
+    data["robots"][0]["sensors"] = [
+        {"type": "camera", "name": "cam", "width_px": 64, "height_px": 48, "hfov_deg": 90,
+         "rate_hz": 10, "mount_x_m": 0.2, "mount_z_m": 0.3, "mount_yaw_deg": -10,
+         "pitch_deg": 20},
+        {"type": "camera", "name": "level", "width_px": 40, "height_px": 30, "hfov_deg": 60,
+         "rate_hz": 10, "mount_x_m": 0.1, "mount_y_m": 0.05, "mount_z_m": 0.25,
+         "mount_yaw_deg": 25},
+    ]  # fmt: skip
+    sim = build(parse_scenario(data, "room"))
+    rec = Recorder(tmp_path / "cam.mcap", sim)
+    for _ in range(50):  # 1 s
+        sim.step()
+        rec.record()
+    rec.close()
+    msgs = _read(tmp_path / "cam.mcap")
+    for cam in ("cam", "level"):
+        images, infos = msgs[f"/a/{cam}/image/compressed"], msgs[f"/a/{cam}/camera_info"]
+        assert len(images) == len(infos) == 11  # 10 Hz over 1 s, t = 0 included
+        for (t_img, img), (t_info, info) in zip(images, infos, strict=True):
+            assert t_info == t_img and info.header.stamp == img.header.stamp
+            assert info.header.frame_id == img.header.frame_id == f"a/{cam}_optical"
+    # pixel centres at integer coordinates: principal point ((W - 1) / 2, (H - 1) / 2), and
+    # f = (W / 2) / tan(hfov / 2): 64 x 48 px, 90 deg: f = 32 / tan 45 deg = 32;
+    # 40 x 30 px, 60 deg: f = 20 / tan 30 deg = 20 sqrt(3) = 34.641016
+    hand = {
+        "cam": np.array([[32.0, 0.0, 31.5], [0.0, 32.0, 23.5], [0.0, 0.0, 1.0]]),
+        "level": np.array([[34.641016, 0.0, 19.5], [0.0, 34.641016, 14.5], [0.0, 0.0, 1.0]]),
+    }
+    K = {}
+    for cam, (w, h) in [("cam", (64, 48)), ("level", (40, 30))]:
+        m = msgs[f"/a/{cam}/camera_info"][-1][1]
+        assert (m.width, m.height, m.distortion_model) == (w, h, "plumb_bob")
+        assert np.asarray(m.d).tolist() == [0.0] * 5
+        K[cam] = np.asarray(m.k).reshape(3, 3)
+        assert K[cam] == pytest.approx(hand[cam], rel=1e-7)
+        assert np.asarray(m.r).reshape(3, 3).tolist() == np.eye(3).tolist()
+        assert (
+            np.asarray(m.p).reshape(3, 4).tolist()
+            == np.column_stack([K[cam], np.zeros(3)]).tolist()
+        )
+        roi = m.roi
+        assert (m.binning_x, m.binning_y, roi.x_offset, roi.y_offset, roi.height,
+                roi.width, roi.do_rectify) == (0, 0, 0, 0, 0, 0, False)  # fmt: skip
+    # the last frames, from the recording alone: base_link at their stamp from /tf (map ->
+    # odom -> base_link), the optical frames from /tf_static, K from camera_info
+    frames = {f.camera: f for f in sim.camera_frames()}
+    t_ns = msgs["/a/cam/camera_info"][-1][0]
+    assert t_ns == round(frames["cam"].stamp_s * 1e9) == round(frames["level"].stamp_s * 1e9)
+    ((_, tf),) = [(t, m) for t, m in msgs["/tf"] if t == t_ns]
+    tr = {t.child_frame_id: t.transform for t in tf.transforms}
+    a, b = tr["a/odom"], tr["a/base_link"]
+    th_a = _yaw(a.rotation)
+    c, s = np.cos(th_a), np.sin(th_a)
+    pose = (a.translation.x + c * b.translation.x - s * b.translation.y,
+            a.translation.y + s * b.translation.x + c * b.translation.y,
+            th_a + _yaw(b.rotation))  # fmt: skip
+    assert pose == pytest.approx(tuple(sim.state.image_pose[0]), abs=1e-9)
+    ((_, static),) = msgs["/tf_static"]
+    # known world points (ahead of the robot) land where the renderer's projection puts them
+    rng = np.random.default_rng(1)
+    ahead = np.column_stack([rng.uniform(1, 3, 30), rng.uniform(-1, 1, 30), rng.uniform(0, 1, 30)])
+    ct, st = np.cos(pose[2]), np.sin(pose[2])
+    pts = np.column_stack([pose[0] + ct * ahead[:, 0] - st * ahead[:, 1],
+                           pose[1] + st * ahead[:, 0] + ct * ahead[:, 1], ahead[:, 2]])  # fmt: skip
+    for i, cam in enumerate(("cam", "level")):
+        t_opt, r_opt = _optical_in_base(static, f"a/{cam}")
+        uv, z = _project(K[cam], t_opt, r_opt, pose, pts)
+        want, depth = project_points(sim.robots[0].cameras[i], sim.state.image_pose[0], pts)
+        assert np.all(depth > 0) and uv == pytest.approx(want, abs=1e-9)
+        assert z == pytest.approx(depth, abs=1e-12)
+    # ... and on the rendered images: each pixel centre at the z-depth the renderer drew there
+    # is a point on a surface of the world. The pitched camera's pixels use the nearest of 2 W
+    # azimuths, exact only on the floor: its points lie on the floor or above it (a wall in
+    # front). The level camera's image is exact: every point is on the floor or a wall face.
+    # Half a pixel off in cy (or 1 % in f) takes them ~0.45 m off; 0.1 px in cx, 9 mm.
+    t_opt, r_opt = _optical_in_base(static, "a/cam")
+    p = _pixel_points(K["cam"], t_opt, r_opt, pose, frames["cam"].depth)
+    on_floor = np.abs(p[:, 2]) < 1e-5
+    assert np.all(on_floor | (p[:, 2] > 0)) and on_floor.mean() > 0.5, on_floor.mean()
+    t_opt, r_opt = _optical_in_base(static, "a/level")
+    p = _pixel_points(K["level"], t_opt, r_opt, pose, frames["level"].depth)
+    ox, oy = sim.world.grid.origin_xy_m  # 1 m cells
+    off_x, off_y = (np.abs((p[:, k] - o + 0.5) % 1.0 - 0.5) for k, o in ((0, ox), (1, oy)))
+    on_floor = np.abs(p[:, 2]) < 1e-5
+    on_wall = (np.minimum(off_x, off_y) < 1e-5) & (p[:, 2] > 0) & (p[:, 2] < WALL_HEIGHT_M)
+    assert np.all(on_floor | on_wall)
+    assert on_floor.sum() > 200 and on_wall.sum() > 200, (on_floor.sum(), on_wall.sum())

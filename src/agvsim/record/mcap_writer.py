@@ -22,6 +22,7 @@ topic                           type                         when
 /<robot>/<sensor>               sensor_msgs/LaserScan        each time the sensor fires
 /<robot>/state                  std_msgs/String              when the controller state changes
 /<robot>/<camera>/image/...     sensor_msgs/CompressedImage  every camera frame (JPEG)
+/<robot>/<camera>/camera_info   sensor_msgs/CameraInfo       with every frame (its intrinsics K)
 /<robot>/slam/map               nav_msgs/OccupancyGrid       ``write_slam_map`` (online SLAM)
 ==============================  ===========================  ==================================
 
@@ -143,6 +144,13 @@ class Recorder:
         self._camera_names = {
             f.slot: f"{topic_name(f.robot_name)}/{topic_name(f.camera)}" for f in frames
         }
+        self._camera_info: dict[int, msg.CameraInfoEncoder] = {}
+        for f in frames:  # intrinsics K as the renderer uses them (CameraSpec.K)
+            spec = self._camera_spec(f)
+            optical = f"{self._camera_names[f.slot]}_optical"
+            self._camera_info[f.slot] = msg.CameraInfoEncoder(
+                optical, spec.width_px, spec.height_px, spec.K
+            )
         self._last_scan = np.full(tab.count, -np.inf)
         self._last_states: list[str | None] = [None] * sim.n
         self._grid = None
@@ -192,7 +200,7 @@ class Recorder:
             mx, my, myaw = (float(v) for v in tab.mount[s])
             tfs.append((base, self._scan_frames[s], (mx, my, 0.0), msg.yaw_quaternion(myaw)))
         for f in sim_frames(self.sim):
-            spec = self.sim.robots[f.robot].cameras[self._camera_index(f)]
+            spec = self._camera_spec(f)
             base = f"{self.robot_topics[f.robot]}/base_link"
             cam = self._camera_names[f.slot]
             x, y = (float(v) for v in spec.mount_xy_m)
@@ -270,17 +278,22 @@ class Recorder:
             self.writer.add_message(cid, stamp, enc.encode(stamp, st.scans[s, : enc.num_beams]))
         self._last_scan[fresh] = st.scan_stamp[fresh]
 
-    def _camera_index(self, frame) -> int:
-        names = [c.name for c in self.sim.robots[frame.robot].cameras]
-        return names.index(frame.camera)
+    def _camera_spec(self, frame):
+        cameras = self.sim.robots[frame.robot].cameras
+        return cameras[[c.name for c in cameras].index(frame.camera)]
 
     def _write_cameras(self) -> None:
+        """Each new frame as a JPEG ``CompressedImage`` and its ``CameraInfo`` (same stamp and
+        frame, one per image as ROS drivers publish them)."""
         for f in sim_frames(self.sim):
             if f.seq > self._camera_seq[f.slot]:
                 self._camera_seq[f.slot] = f.seq
                 name = self._camera_names[f.slot]
                 topic, frame = f"/{name}/image/compressed", f"{name}_optical"
                 self.write_image(topic, f.stamp_s, frame, f.rgb, "jpeg")
+                t_ns = _ns(f.stamp_s)
+                info = self._camera_info[f.slot].encode(t_ns)
+                self._write(f"/{name}/camera_info", msg.CAMERA_INFO, t_ns, info)
 
     def _write_states(self, t_ns: int) -> None:
         states = self.sim.active_states()

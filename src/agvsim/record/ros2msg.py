@@ -54,6 +54,14 @@ _DEFS: dict[str, str] = {
         "float32[] ranges\nfloat32[] intensities\n"
     ),
     "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data\n",
+    "sensor_msgs/RegionOfInterest": (
+        "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n"
+    ),
+    "sensor_msgs/CameraInfo": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\n"
+        "float64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\n"
+        "uint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"
+    ),
 }
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -61,8 +69,9 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 STRING = "std_msgs/msg/String"
-TYPES = (TF_MESSAGE, ODOMETRY, LASER_SCAN, OCCUPANCY_GRID, COMPRESSED_IMAGE, STRING)
+TYPES = (TF_MESSAGE, ODOMETRY, LASER_SCAN, OCCUPANCY_GRID, COMPRESSED_IMAGE, CAMERA_INFO, STRING)
 
 _SEP = "=" * 80 + "\n"
 _BAD = re.compile(r"[^A-Za-z0-9_]")
@@ -287,6 +296,30 @@ def encode_compressed_image(t_ns: int, frame_id: str, fmt: str, data: bytes) -> 
     return c.bytes()
 
 
+def encode_camera_info(
+    t_ns: int, frame_id: str, width_px: int, height_px: int, K: np.ndarray
+) -> bytes:
+    """``sensor_msgs/CameraInfo`` of an ideal pinhole camera with the (3, 3) camera matrix
+    ``K`` (OpenCV pixel convention, as ROS's): model ``plumb_bob`` with five zero distortion
+    coefficients, ``r`` the identity, ``p = [K | 0]``, no binning, an empty (full) ROI."""
+    k = np.asarray(K, dtype=np.float64)
+    if k.shape != (3, 3):
+        raise ValueError(f"K must be a (3, 3) camera matrix, got shape {k.shape}")
+    c = Cdr()
+    c.header(t_ns, frame_id)
+    c.u32(height_px)
+    c.u32(width_px)
+    c.string("plumb_bob")
+    c.seq(struct.pack("<5d", *([0.0] * 5)), 5, 8)  # d
+    c.f64(*k.ravel().tolist())  # k
+    c.f64(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # r
+    c.f64(*np.column_stack([k, np.zeros(3)]).ravel().tolist())  # p
+    for v in (0, 0, 0, 0, 0, 0):  # binning_x, binning_y, roi x_offset, y_offset, height, width
+        c.u32(v)
+    c.buf += b"\x00"  # roi.do_rectify = false
+    return c.bytes()
+
+
 # ---------------------------------------------------------------------- template encoders
 # A recorder writes the same frames again and again: only the stamp and the numbers change.
 # These encoders build the message once and then patch the stamp and numbers in place.
@@ -346,6 +379,19 @@ class LaserScanEncoder:
         return b"".join(
             (_ENCAPSULATION, _STAMP.pack(*_sec_nsec(t_ns)), self._head, r.tobytes(), self._tail)
         )
+
+
+class CameraInfoEncoder:
+    """``sensor_msgs/CameraInfo`` of one camera (fixed frame and intrinsics):
+    ``encode(t_ns)``, the stamp being the only thing that changes."""
+
+    def __init__(self, frame_id: str, width_px: int, height_px: int, K: np.ndarray):
+        self.template = encode_camera_info(0, frame_id, width_px, height_px, K)
+
+    def encode(self, t_ns: int) -> bytes:
+        buf = bytearray(self.template)
+        _STAMP.pack_into(buf, 4, *_sec_nsec(t_ns))
+        return bytes(buf)
 
 
 class TfEncoder:
