@@ -86,6 +86,81 @@ def test_changing_the_model_gives_its_own_parameters():
     assert s.sim.state.distance_m[0] > 0.5
 
 
+def test_a_camera_set_in_the_mask_is_built_and_removed():
+    s = session(controller={"type": "idle"})
+    fields = {f.key: f for f in mask_fields(s.robot_config("agv"))}
+    assert fields["sensors.camera"].value is False
+    assert fields["sensors.camera.mount_z_m"].value == pytest.approx(0.4)  # derived default
+    values = {k: f.value for k, f in fields.items()}
+    values.update(
+        {
+            "sensors.camera": True,
+            "sensors.camera.width_px": 64.0,  # a number widget may hand back a float
+            "sensors.camera.height_px": 48,
+            "sensors.camera.hfov_deg": 90.0,
+            "sensors.camera.pitch_deg": 10.0,
+        }
+    )
+    s.apply_robot("agv", robot_from_mask(s.robot_config("agv"), values))
+    (cam,) = [c for c in s.robot_config("agv")["sensors"] if c["type"] == "camera"]
+    assert cam == {
+        "type": "camera",
+        "width_px": 64,
+        "height_px": 48,
+        "hfov_deg": 90.0,
+        "pitch_deg": 10.0,
+    }  # the keys left at their defaults stay unset, as in a hand-written file
+    (spec,) = s.sim.robots[0].cameras
+    assert (spec.width_px, spec.height_px) == (64, 48)
+    assert spec.hfov_rad == pytest.approx(np.pi / 2)
+    assert spec.pitch_rad == pytest.approx(np.deg2rad(10.0))
+    assert spec.mount_z_m == pytest.approx(0.4)
+    s.step(1)
+    (frame,) = s.sim.camera_frames()
+    assert frame.rgb.shape == (48, 64, 3)
+    assert s.sim.robots[0].sensors[0].name == "lidar"  # the lidar is kept
+    # the panel shows what was applied; switching the camera off removes it
+    values = {f.key: f.value for f in mask_fields(s.robot_config("agv"))}
+    assert values["sensors.camera.width_px"] == 64
+    values["sensors.camera"] = False
+    s.apply_robot("agv", robot_from_mask(s.robot_config("agv"), values))
+    assert [c["type"] for c in s.robot_config("agv")["sensors"]] == ["lidar"]
+    assert s.sim.robots[0].cameras == ()
+    assert s.sim.camera_frames() == []
+
+
+def test_a_bad_camera_value_is_refused_with_the_field_named():
+    s = session()
+    before = s.robot_config("agv")
+    values = {f.key: f.value for f in mask_fields(before)}
+    values["sensors.camera"] = True
+    values["sensors.camera.width_px"] = 0
+    with pytest.raises(ScenarioError) as err:
+        s.apply_robot("agv", robot_from_mask(before, values))
+    assert any("width_px" in p and "greater than or equal to 8" in p for p in err.value.problems)
+    values["sensors.camera.width_px"] = 320
+    values["sensors.camera.mount_z_m"] = 1.5  # above the 1 m walls
+    with pytest.raises(ScenarioError, match="mount_z_m"):
+        s.apply_robot("agv", robot_from_mask(before, values))
+    assert s.robot_config("agv") == before
+    assert s.sim.cameras is None
+
+
+def test_a_second_camera_the_mask_does_not_show_is_kept():
+    two = [
+        {"type": "camera", "name": "front", "width_px": 32, "height_px": 24},
+        {"type": "camera", "name": "rear", "mount_yaw_deg": 180.0},
+    ]
+    s = session(sensors=two)
+    values = {f.key: f.value for f in mask_fields(s.robot_config("agv"))}
+    assert values["sensors.camera.width_px"] == 32
+    values["sensors.camera.hfov_deg"] = 80.0
+    s.apply_robot("agv", robot_from_mask(s.robot_config("agv"), values))
+    specs = {c.name: c for c in s.sim.robots[0].cameras}
+    assert specs["front"].hfov_rad == pytest.approx(np.deg2rad(80.0))
+    assert specs["rear"].hfov_rad == pytest.approx(np.deg2rad(60.0))
+
+
 def test_other_robots_keep_their_live_state_when_one_is_rebuilt():
     s = session()
     name = s.add_robot("tricycle", 1.5, 2.0, 0.0)

@@ -61,3 +61,29 @@ def test_the_3d_view_draws_every_marker_on_its_wall(app):
     app.session.toggle_cell(1, 1)
     app.scene.update()
     assert len(app.scene._markers) == 6
+
+
+def test_a_camera_turned_on_in_the_mask_shows_its_frames(app):
+    panel, session = app.panel, app.session
+    panel._select("blind")
+    w = panel._mask_widgets
+    assert w["sensors.camera"].value is False
+    w["sensors.camera"].value = True
+    w["sensors.camera.width_px"].value = 64
+    w["sensors.camera.height_px"].value = 48
+    panel._apply()
+    assert "applied" in panel.mask_msg.content
+    (spec,) = session.sim.robots[session.sim.robot_index("blind")].cameras
+    assert (spec.width_px, spec.height_px) == (64, 48)
+    panel.refresh()
+    assert panel.camera_view is not None and panel.camera_view.image.shape == (48, 64, 3)
+    panel._mask_widgets["sensors.camera.width_px"].value = 0
+    panel._apply()
+    assert "width_px" in panel.mask_msg.content and "greater than or equal to 8" in (
+        panel.mask_msg.content
+    )
+    panel._mask_widgets["sensors.camera"].value = False
+    panel._apply()
+    assert session.sim.robots[session.sim.robot_index("blind")].cameras == ()
+    panel.refresh()
+    assert panel.camera_view is None

@@ -182,10 +182,15 @@ def _sensor(
     return spec
 
 
+def default_camera_height(wheel_radius_m: float) -> float:
+    """Where a camera without ``mount_z_m`` sits: 5 cm above the robot's body (m)."""
+    return float(wheel_radius_m) + BODY_HEIGHT_M + 0.05
+
+
 def _camera(sc: CameraConfig, rc: RobotConfig, model: Any, offset: float) -> CameraSpec:
     """A camera spec; by default on the front of the body, 5 cm above its top."""
     wheel_r = float(np.asarray(getattr(model, "wheel_radius_m", 0.1)).reshape(-1)[0])
-    mount_z = sc.mount_z_m if sc.mount_z_m is not None else wheel_r + BODY_HEIGHT_M + 0.05
+    mount_z = sc.mount_z_m if sc.mount_z_m is not None else default_camera_height(wheel_r)
     if not mount_z < WALL_HEIGHT_M:
         raise ValueError(
             f"mount_z_m: the camera at {mount_z:g} m must be below the wall tops "

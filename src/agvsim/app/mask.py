@@ -18,6 +18,7 @@ from typing import Any, Literal
 import yaml
 
 from agvsim.kinematics import MODELS
+from agvsim.scenario import default_camera_height
 from agvsim.scenario_schema import ControllerConfig
 
 Kind = Literal["text", "number", "int", "dropdown", "checkbox", "yaml"]
@@ -58,7 +59,29 @@ SENSOR_FIELDS = {
         ("rate_hz", "rate (Hz)", "number", 10.0),
         ("noise_std_m", "noise std (m)", "number", 0.0),
     ],
+    "camera": [
+        ("width_px", "width (px)", "int", 320),
+        ("height_px", "height (px)", "int", 240),
+        ("hfov_deg", "field of view (deg)", "number", 60.0),
+        ("rate_hz", "rate (Hz)", "number", 10.0),
+        ("range_max_m", "range (m)", "number", 30.0),
+        ("mount_z_m", "mount height (m)", "number", None),  # None: see _default
+        ("pitch_deg", "pitch down (deg)", "number", 0.0),
+        ("noise_std", "noise std (0..255)", "number", 0.0),
+    ],
 }
+
+
+def _default(robot: dict, key: str, default: Any) -> Any:
+    """The value the panel shows for an unset sensor key: the schema's default, or for the
+    camera's height the one agvsim.scenario derives (5 cm above the body)."""
+    if key != "mount_z_m":
+        return default
+    model = robot.get("model", "differential")
+    r = robot.get("params", {}).get("wheel_radius_m")
+    if r is None:
+        r = next((f.default for f in dc_fields(MODELS[model]) if f.name == "wheel_radius_m"), 0.1)
+    return round(default_camera_height(r), 9)
 
 
 def _sensor(robot: dict, kind: str) -> dict | None:
@@ -111,7 +134,7 @@ def mask_fields(robot: dict, allow_python: bool = False) -> list[Field]:
         s = _sensor(robot, kind)
         out.append(Field(f"sensors.{kind}", f"{kind} on", "checkbox", s is not None))
         for key, label, fk, default in items:
-            v = default if s is None or s.get(key) is None else s[key]
+            v = _default(robot, key, default) if s is None or s.get(key) is None else s[key]
             out.append(Field(f"sensors.{kind}.{key}", f"{kind} {label}", fk, v))
     ctrl = dict(robot.get("controller", {"type": "idle"}))
     ctype = ctrl.pop("type", "idle")
@@ -166,7 +189,9 @@ def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
             if key.startswith(group + "."):
                 sub[key.split(".", 1)[1]] = v
         out[group] = sub
-    sensors = [s for s in out.get("sensors", []) if s.get("type") not in SENSOR_FIELDS]
+    # the mask shows the first sensor of each kind; further ones (a second camera) stay as they are
+    shown = [id(_sensor(out, kind)) for kind in SENSOR_FIELDS]
+    sensors = [s for s in out.get("sensors", []) if id(s) not in shown]
     for kind in SENSOR_FIELDS:
         on = values.get(f"sensors.{kind}", _sensor(robot, kind) is not None)
         if not on:
@@ -175,7 +200,7 @@ def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
         for key, _label, fk, default in SENSOR_FIELDS[kind]:
             v = values.get(f"sensors.{kind}.{key}")
             # keys the entry leaves unset stay unset while the panel shows their default
-            if v is not None and (key in s or v != default):
+            if v is not None and (key in s or v != _default(robot, key, default)):
                 s[key] = int(round(v)) if fk == "int" else v
         sensors.append(s)
     out["sensors"] = sensors
