@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_version_is_defined_once():
     assert importlib.metadata.version("agvsim") == agvsim.__version__
     lines = (ROOT / "pyproject.toml").read_text().splitlines()
-    assert not [line for line in lines if line.startswith("version =")]
+    assert not [line for line in lines if line.startswith('version = "')]
 
 
 def test_python_dash_m_runs_the_cli():
