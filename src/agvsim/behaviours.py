@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -40,12 +40,16 @@ from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
 from agvsim.control.wall_follow import WallFollower
 
+# Every behaviour config: unknown keys, NaN / inf and overlong text are refused at the edge
+CONFIG = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=200)
+_Cell = Annotated[int, Field(ge=0, le=10_000_000)]  # numba takes 64-bit integers only
+
 
 # ---------------------------------------------------------------------------------- goal
 class GoalConfig(BaseModel):
     """``controller: {type: goto_goal, goal_x_m: 3, goal_y_m: -2}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
     type: Literal["goto_goal"]
     goal_x_m: float
     goal_y_m: float
@@ -65,7 +69,7 @@ class GoalConfig(BaseModel):
 class WaypointsConfig(BaseModel):
     """``controller: {type: waypoints, points: [[0, 0], [3, 0], [3, 3]], loop: true}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
     type: Literal["waypoints"]
     points: list[tuple[float, float]] = Field(min_length=1, description="[x_m, y_m] each")
     loop: bool = False
@@ -110,10 +114,10 @@ def build_waypoints(cfg: WaypointsConfig, ctx: ControllerContext) -> PurePursuit
 class MazeSolverConfig(BaseModel):
     """``controller: {type: maze_solver, goal_cell: [17, 17], method: astar}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
     type: Literal["maze_solver"]
     method: Literal["astar", "tremaux"] = "astar"
-    goal_cell: tuple[int, int] | None = Field(None, description="[row, col] of the map grid")
+    goal_cell: tuple[_Cell, _Cell] | None = Field(None, description="[row, col] of the map grid")
     goal_x_m: float | None = None
     goal_y_m: float | None = None
     speed_m_s: float = Field(0.8, gt=0, le=100)
@@ -187,7 +191,7 @@ def build_maze_solver(
 class PursueConfig(BaseModel):
     """``controller: {type: pursue, target: blue, ...}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
     type: Literal["pursue"]
     target: str = Field(min_length=1, description="the robot to catch (list it in 'knows')")
     reorient_deg: float = Field(22.5, gt=0, lt=180, description="turn on the spot beyond this")
@@ -201,7 +205,7 @@ class PursueConfig(BaseModel):
 class EvadeConfig(BaseModel):
     """``controller: {type: evade, pursuer: red, ...}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
     type: Literal["evade"]
     pursuer: str = Field(min_length=1, description="the robot to flee (list it in 'knows')")
     alert_distance_m: float = Field(4.0, gt=0, le=1000)
@@ -268,7 +272,7 @@ def build_evade(cfg: EvadeConfig, ctx: ControllerContext) -> Evader:
 class TeleopConfig(BaseModel):
     """``controller: {type: teleop, deadman_s: 0.5}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
     type: Literal["teleop"]
     deadman_s: float = Field(0.5, gt=0, le=3600)
     linear_speed_m_s: float = Field(0.5, gt=0, le=100)
@@ -295,7 +299,7 @@ def build_teleop(cfg: TeleopConfig, ctx: ControllerContext) -> Teleop:
 class WallFollowConfig(BaseModel):
     """``controller: {type: wall_follow, side: left, ...}`` in a scenario."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
 
     type: Literal["wall_follow"]
     side: Literal["left", "right"] = "left"
@@ -342,9 +346,9 @@ def build_wall_follow(cfg: WallFollowConfig, ctx: ControllerContext) -> WallFoll
 class MarkerSearchConfig(BaseModel):
     """``controller: {type: marker_search, marker_id: 3, stop_distance_m: 0.8}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = CONFIG
     type: Literal["marker_search"]
-    marker_id: int = Field(ge=0, description="the ArUco / AprilTag id to find")
+    marker_id: int = Field(ge=0, le=1_000_000, description="the ArUco / AprilTag id to find")
     dictionary: Literal[
         "4x4_50", "4x4_100", "4x4_250", "4x4_1000", "5x5_50", "5x5_100", "5x5_250", "5x5_1000",
         "6x6_50", "6x6_100", "6x6_250", "6x6_1000", "7x7_50", "7x7_100", "7x7_250", "7x7_1000",
