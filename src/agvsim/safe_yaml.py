@@ -104,11 +104,10 @@ def _measure(text: str, source: str, limits: YamlLimits) -> None:
                         "(limit yaml_max_depth; see docs/scenario.md, 'Limits')",
                         line,
                     )
-                stack.append([event.anchor, 0])
-                continue
-            if isinstance(event, yaml.CollectionEndEvent):
-                anchor, inner = stack.pop()
-                size = inner + 1
+                stack.append([event.anchor, 1])  # the collection itself counts as one
+                size = 0
+            elif isinstance(event, yaml.CollectionEndEvent):
+                anchor, size = stack.pop()
                 if anchor is not None:
                     sizes[anchor] = size
             elif isinstance(event, yaml.ScalarEvent):
@@ -125,8 +124,7 @@ def _measure(text: str, source: str, limits: YamlLimits) -> None:
                 raise YamlInputError(
                     source,
                     f"the document holds more than {limits.max_nodes:,} values ({what} past "
-                    "the limit yaml_max_nodes; see docs/scenario.md, 'Limits'); put large "
-                    "maps in a map file (world.file)",
+                    "the limit yaml_max_nodes; see docs/scenario.md, 'Limits')",
                     line,
                 )
     finally:
@@ -145,7 +143,7 @@ def load_yaml(text: str | bytes, source: str, limits: YamlLimits | None = None) 
         raise YamlInputError(
             source,
             f"{size:,} bytes is over the {limits.max_bytes:,}-byte limit yaml_max_bytes "
-            "(see docs/scenario.md, 'Limits'); put large maps in a map file (world.file)",
+            "(see docs/scenario.md, 'Limits')",
         )
     if isinstance(text, bytes):
         text = _decode(text, source)
@@ -172,7 +170,7 @@ def load_yaml_file(path: str | Path, limits: YamlLimits | None = None) -> Any:
             raise YamlInputError(
                 str(p),
                 f"{size:,} bytes is over the {limits.max_bytes:,}-byte limit yaml_max_bytes "
-                "(see docs/scenario.md, 'Limits'); put large maps in a map file (world.file)",
+                "(see docs/scenario.md, 'Limits')",
             )
         data = p.read_bytes()
     except OSError as err:

@@ -130,7 +130,8 @@ def scenario_from_text(
 
 
 def _yaml_problem(err: YamlInputError) -> str:
-    return (f"line {err.line}: " if err.line is not None else "") + err.problem
+    hint = "; put a large map in a map file (world.file)" if "yaml_max_" in err.problem else ""
+    return (f"line {err.line}: " if err.line is not None else "") + err.problem + hint
 
 
 # ---------------------------------------------------------------------------------- building

@@ -7,6 +7,7 @@ Loading and building live in ``agvsim.scenario``, which re-exports the names imp
 from __future__ import annotations
 
 import difflib
+import math
 import re
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
@@ -306,7 +307,7 @@ class RobotConfig(_Strict):
     name: Name
     model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
     mode: ControlMode = ControlMode.INVERSE
-    params: dict[str, float | str] = Field({}, description="model parameters, see `agvsim models`")
+    params: dict[Name, Any] = Field({}, description="model parameters, see `agvsim models`")
     body: Body = Body()
     pose: Pose = Pose()
     color: str = Field("#d62728", max_length=64)
@@ -317,6 +318,19 @@ class RobotConfig(_Strict):
         [], description="robots whose true pose this robot's controller sees (obs.others)"
     )
     slam: SlamBlock | None = None
+
+    @field_validator("params")
+    @classmethod
+    def _numbers_or_text(cls, params: dict[str, Any]) -> dict[str, Any]:
+        for key, value in params.items():
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            if number and not math.isfinite(value):
+                raise ValueError(f"{key}: must be a finite number (NaN and inf are not allowed)")
+            if not (number or (isinstance(value, str) and len(value) <= 200)):
+                raise ValueError(
+                    f"{key}: must be a number or a short text, got {short_repr(value)}"
+                )
+        return params
 
     @field_validator("color")
     @classmethod
