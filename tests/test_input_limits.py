@@ -67,7 +67,7 @@ def test_encodings():
 def test_size_and_odd_scalars(tmp_path):
     p = tmp_path / "big.yaml"
     p.write_text("a: " + "x" * 100, encoding="utf-8")
-    with pytest.raises(YamlInputError, match=r"103 bytes is over the 100-byte limit"):
+    with pytest.raises(YamlInputError, match=r"103 bytes, over the limit yaml_max_bytes = 100"):
         load_yaml_file(p, YamlLimits(max_bytes=100))
     with pytest.raises(YamlInputError, match="not valid YAML .*4300 digits"):
         load_yaml("seed: " + "7" * 5000, "t")

@@ -19,6 +19,7 @@ the line, the limit and how to raise it.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -64,6 +65,14 @@ def _decode(data: bytes, source: str) -> str:
     for bom, name in boms.items():
         if data.startswith(bom):
             raise YamlInputError(source, f"the file is {name} text; save it as UTF-8")
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise YamlInputError(
+            source,
+            "byte 0x00 (NUL) is not allowed in a text file (UTF-16 without a byte-order mark?); "
+            "save it as UTF-8",
+            data[:nul].count(b"\n") + 1,
+        )
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as err:
@@ -74,10 +83,13 @@ def _decode(data: bytes, source: str) -> str:
         ) from None
 
 
-def _yaml_problem(err: Exception) -> tuple[str, int | None]:
+def _yaml_problem(err: Exception, text: str) -> tuple[str, int | None]:
     """(what is wrong, 1-based line) of a PyYAML error."""
     mark = getattr(err, "problem_mark", None)
     line = None if mark is None else int(mark.line) + 1
+    position = getattr(err, "position", None)  # a ReaderError: a character index
+    if line is None and isinstance(position, int):
+        line = text.count("\n", 0, position) + 1
     problem = getattr(err, "problem", None)
     if problem is None and isinstance(err, yaml.reader.ReaderError):
         problem = f"character {err.character!r} is not allowed in YAML"  # type: ignore[attr-defined]
@@ -133,6 +145,14 @@ def _measure(text: str, source: str, limits: YamlLimits) -> None:
             dispose()
 
 
+def _too_big(source: str, size: int, limits: YamlLimits) -> YamlInputError:
+    return YamlInputError(
+        source,
+        f"the file is {size:,} bytes, over the limit yaml_max_bytes = {limits.max_bytes:,} "
+        "(see docs/scenario.md, 'Limits')",
+    )
+
+
 def load_yaml(text: str | bytes, source: str, limits: YamlLimits | None = None) -> Any:
     """The data of one YAML document (``safe_load``), refused with :class:`YamlInputError`
     when it breaks ``limits`` (size, nesting depth, nodes with aliases expanded), is not
@@ -140,24 +160,23 @@ def load_yaml(text: str | bytes, source: str, limits: YamlLimits | None = None) 
     limits = limits or YamlLimits()
     size = len(text) if isinstance(text, bytes) else len(text.encode("utf-8", "surrogatepass"))
     if size > limits.max_bytes:
-        raise YamlInputError(
-            source,
-            f"{size:,} bytes is over the {limits.max_bytes:,}-byte limit yaml_max_bytes "
-            "(see docs/scenario.md, 'Limits')",
-        )
+        raise _too_big(source, size, limits)
     if isinstance(text, bytes):
         text = _decode(text, source)
     try:
         _measure(text, source, limits)
         return yaml.load(text, Loader=_Loader)  # noqa: S506 - a safe loader
     except yaml.YAMLError as err:
-        problem, line = _yaml_problem(err)
+        problem, line = _yaml_problem(err, text)
         raise YamlInputError(source, f"not valid YAML ({problem})", line) from None
     except (ValueError, RecursionError, MemoryError) as err:
         if isinstance(err, YamlInputError):
             raise
         # e.g. an integer of more than 4300 digits (Python refuses to convert it)
-        raise YamlInputError(source, f"not valid YAML ({type(err).__name__}: {err})") from None
+        digits = re.search(r"\d{4000,}", text)
+        line = None if digits is None else text.count("\n", 0, digits.start()) + 1
+        problem = f"not valid YAML ({type(err).__name__}: {str(err)[:200]})"
+        raise YamlInputError(source, problem, line) from None
 
 
 def load_yaml_file(path: str | Path, limits: YamlLimits | None = None) -> Any:
@@ -167,11 +186,7 @@ def load_yaml_file(path: str | Path, limits: YamlLimits | None = None) -> Any:
     try:
         size = p.stat().st_size
         if size > limits.max_bytes:
-            raise YamlInputError(
-                str(p),
-                f"{size:,} bytes is over the {limits.max_bytes:,}-byte limit yaml_max_bytes "
-                "(see docs/scenario.md, 'Limits')",
-            )
+            raise _too_big(str(p), size, limits)
         data = p.read_bytes()
     except OSError as err:
         raise YamlInputError(str(p), f"cannot read the file ({err.strerror or err})") from None

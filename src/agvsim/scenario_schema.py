@@ -399,8 +399,10 @@ def _loc(loc: tuple) -> str:
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        else:
-            out += ("." if out else "") + str(part)
+        else:  # a key that is not a plain name (a user's odd key) is quoted
+            text = str(part)
+            plain = re.fullmatch(r"[\w\-]{1,64}", text) or text.startswith("'")
+            out += ("." if out else "") + (text if plain else short_repr(text, 40))
     return out or "(top level)"
 
 
@@ -467,9 +469,7 @@ def _format_errors(err: ValidationError) -> list[str]:
     out = []
     errors = err.errors()
     for e in errors[:MAX_PROBLEMS]:
-        loc = tuple(
-            short_repr(p, 40) if isinstance(p, str) and len(p) > 40 else p for p in e["loc"]
-        )
+        loc = tuple(e["loc"])
         where = _loc(loc)
         if e["type"] == "extra_forbidden":
             key = str(loc[-1])
