@@ -100,6 +100,19 @@ def test_steps_limit_and_raising_it():
     assert parse_scenario(data, limits=Limits(max_steps=50_000_000))._limits.max_steps == 50_000_000
 
 
+def test_robot_count_is_checked_before_validation():
+    robot = {"name": "r", "model": "differential"}
+    data = _scenario(robots=[robot] * 3)  # the same name thrice: validation would refuse it
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(data, limits=Limits(max_robots=2))
+    assert info.value.problems == [
+        "robots: 3 robots is over the limit max_robots = 2; raise it with 'limits: "
+        "{max_robots: 3}' in the scenario or '--limit max_robots=3' (docs/scenario.md, 'Limits')"
+    ]
+    with pytest.raises(ScenarioError, match="names must be unique"):  # raised: validated
+        parse_scenario({**data, "limits": {"max_robots": 3}}, limits=Limits(max_robots=2))
+
+
 def test_random_maze_cells():
     # rows 2 x (corridor 2 + wall 1) + wall 1 = 7, cols 3 x 3 + 1 = 10: 70 cells
     data = _scenario(world={"random": {"rows": 2, "cols": 3, "seed": 1}})

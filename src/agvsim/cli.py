@@ -127,7 +127,7 @@ def _finite_duration(value: float | None) -> float | None:
 
 
 LIMIT_HELP = (
-    "Raise a limit, NAME=VALUE (repeatable): max_steps, max_grid_cells, "
+    "Raise a limit, NAME=VALUE (repeatable): max_steps, max_robots, max_grid_cells, "
     "max_camera_pixels_per_s, max_lidar_rays_per_s, yaml_max_bytes, yaml_max_nodes, "
     "yaml_max_depth (docs/scenario.md, 'Limits')."
 )

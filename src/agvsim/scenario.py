@@ -11,6 +11,7 @@ import importlib.util
 import inspect
 import math
 from dataclasses import fields as dc_fields
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,7 @@ from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file
-from agvsim.scenario_limits import Limits, check_grid_cells, check_scenario
+from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
 from agvsim.scenario_schema import (
     AvoidConfig,
     CameraConfig,
@@ -81,6 +82,7 @@ def parse_scenario(
         raise ScenarioError(
             source, [f"the file must hold a mapping of keys, got {type(data).__name__}"]
         )
+    _count_robots_first(data, limits or Limits(), limits_from_file, source)
     try:
         sc = Scenario.model_validate(data)
     except ValidationError as err:
@@ -93,6 +95,20 @@ def parse_scenario(
         raise ScenarioError(source, problems)
     sc._limits = effective
     return sc
+
+
+def _count_robots_first(data: dict, limits: Limits, from_file: bool, source: str) -> None:
+    """Refuse a huge robot list before validating it (validation costs ~50 us a robot)."""
+    robots, block = data.get("robots"), data.get("limits")
+    if not isinstance(robots, list):
+        return
+    raised = block.get("max_robots") if from_file and isinstance(block, dict) else None
+    if isinstance(raised, int) and not isinstance(raised, bool) and raised > limits.max_robots:
+        limits = replace(limits, max_robots=raised)
+    try:
+        check_robot_count(len(robots), limits)
+    except ValueError as err:
+        raise ScenarioError(source, [str(err)]) from None
 
 
 def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
@@ -224,8 +240,6 @@ def _sensor(
             "lidar", sc.beams, float(np.deg2rad(sc.fov_deg)), sc.range_max_m, amin, **common
         )
     if sc.name:
-        from dataclasses import replace
-
         spec = replace(spec, name=sc.name)
     return spec
 

@@ -6,9 +6,10 @@ refuses such files up front with a message naming the field, the limit and how t
 
 Two kinds of limit, documented in docs/scenario.md ("Limits"):
 
-* limits on the run (``max_steps``, ``max_grid_cells``, ``max_camera_pixels_per_s``,
-  ``max_lidar_rays_per_s``): a scenario raises them for itself in a ``limits:`` block, unless
-  it comes from somewhere untrusted (the browser's upload passes ``limits_from_file=False``);
+* limits on the run (``max_steps``, ``max_robots``, ``max_grid_cells``,
+  ``max_camera_pixels_per_s``, ``max_lidar_rays_per_s``): a scenario raises them for itself
+  in a ``limits:`` block, unless it comes from somewhere untrusted (the browser's upload
+  passes ``limits_from_file=False``);
 * limits on reading the YAML (``yaml_max_bytes``, ``yaml_max_nodes``, ``yaml_max_depth``):
   they protect the reading itself, so only the caller raises them (``agvsim run/validate
   --limit NAME=VALUE``, or ``load_scenario(path, limits=Limits(...))``).
@@ -26,7 +27,13 @@ from agvsim.world.loaders import MAX_CELLS
 if TYPE_CHECKING:
     from agvsim.scenario_schema import LimitsConfig, Scenario, WorldConfig
 
-RUN_LIMITS = ("max_steps", "max_grid_cells", "max_camera_pixels_per_s", "max_lidar_rays_per_s")
+RUN_LIMITS = (
+    "max_steps",
+    "max_robots",
+    "max_grid_cells",
+    "max_camera_pixels_per_s",
+    "max_lidar_rays_per_s",
+)
 
 
 @dataclass(frozen=True)
@@ -34,6 +41,7 @@ class Limits:
     """Every limit with its default (see the module docstring for who may raise which)."""
 
     max_steps: int = 10_000_000  # duration_s / dt_s
+    max_robots: int = 10_000
     max_grid_cells: int = MAX_CELLS  # rows x cols of the map (5000 x 5000)
     max_camera_pixels_per_s: float = 100e6  # width x height x rate, all cameras together
     max_lidar_rays_per_s: float = 50e6  # beams x rate, all range sensors together
@@ -116,6 +124,15 @@ def steps_of(duration_s: float, dt_s: float, limits: Limits, where: str) -> int:
     return int(round(n))
 
 
+def check_robot_count(n: int, limits: Limits) -> None:
+    """ValueError when a scenario lists more than ``max_robots`` robots."""
+    if n > limits.max_robots:
+        raise ValueError(
+            f"robots: {n:,} robots is over the limit max_robots = {limits.max_robots:,}; "
+            + _how("max_robots", n)
+        )
+
+
 def check_grid_cells(rows: int, cols: int, limits: Limits, where: str) -> None:
     """ValueError when a map of ``rows x cols`` cells is over ``max_grid_cells``."""
     n = rows * cols
@@ -145,6 +162,10 @@ def check_scenario(sc: Scenario, limits: Limits) -> list[str]:
     problems = []
     try:
         steps_of(sc.duration_s, sc.dt_s, limits, "duration_s")
+    except ValueError as err:
+        problems.append(str(err))
+    try:
+        check_robot_count(len(sc.robots), limits)
     except ValueError as err:
         problems.append(str(err))
     shape = grid_shape(sc.world)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from collections import Counter
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
@@ -351,6 +352,7 @@ class LimitsConfig(_Strict):
     """The scenario raising (or lowering) its own run limits; see agvsim.scenario_limits."""
 
     max_steps: int | None = Field(None, ge=1, le=10**15, description="duration_s / dt_s")
+    max_robots: int | None = Field(None, ge=1, le=10**9, description="robots in the scenario")
     max_grid_cells: int | None = Field(None, ge=1, le=10**12, description="map rows x cols")
     max_camera_pixels_per_s: float | None = Field(
         None, gt=0, description="width x height x rate, all cameras"
@@ -380,12 +382,14 @@ class Scenario(_Strict):
     @model_validator(mode="after")
     def _unique_names(self) -> Scenario:
         names = [r.name for r in self.robots]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        counts = Counter(names)  # not names.count(): 100,000 robots must not take minutes
+        dup = sorted(n for n, c in counts.items() if c > 1)
         if dup:
-            raise ValueError(f"robot names must be unique; repeated: {dup}")
+            shown = dup[:20] + ([f"... {len(dup) - 20} more"] if len(dup) > 20 else [])
+            raise ValueError(f"robot names must be unique; repeated: {shown}")
         for k, r in enumerate(self.robots):
             for other in r.knows:
-                if other not in names or other == r.name:
+                if other not in counts or other == r.name:
                     raise ValueError(
                         f"robots[{k}].knows: {other!r} is not another robot"
                         + _did_you_mean(other, [n for n in names if n != r.name])
