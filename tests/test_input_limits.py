@@ -171,6 +171,24 @@ def test_limits_from_options():
             Limits.from_options([bad])
 
 
+def test_huge_finite_numbers_are_refused():
+    # 1e300 degrees once overflowed the float32 of the recorded LaserScan after the run
+    data = _scenario()
+    data["robots"][0]["sensors"] = [{"type": "lidar", "angle_min_deg": -1e300, "fov_deg": 90}]
+    data["robots"][0]["controller"] = {"type": "goto_goal", "goal_x_m": 1e13, "goal_y_m": 0}
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(data)
+    assert info.value.problems == [
+        "robots[0].sensors[0].lidar.angle_min_deg: too large (allowed: magnitude <= 1e+12) "
+        "(got -1e+300)",
+        "robots[0].controller.goto_goal.goal_x_m: too large (allowed: magnitude <= 1e+12) "
+        "(got 10000000000000.0)",
+    ]
+    data["robots"][0]["controller"]["goal_x_m"] = 1e12  # the bound itself is allowed
+    data["robots"][0]["sensors"][0]["angle_min_deg"] = -45.0
+    assert parse_scenario(data).robots[0].controller.goal_x_m == 1e12
+
+
 def test_names_and_problem_count_are_bounded():
     data = _scenario(name="n" * 5_000_000)
     with pytest.raises(ScenarioError) as info:

@@ -139,7 +139,7 @@ CASES = [
     (
         "bad_colour.yaml",
         r"robots\[0\]\.color\b",
-        ["'not-a-colour' is not a colour", "'#rrggbb'", "matplotlib colour name"],
+        ["not a colour", "'#rrggbb'", "matplotlib colour name", "(got 'not-a-colour')"],
     ),
     ("negative_seed.yaml", r"\bseed\b", ["greater than or equal to 0", "-5"]),
     (

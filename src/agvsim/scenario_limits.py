@@ -27,6 +27,21 @@ from agvsim.world.loaders import MAX_CELLS
 if TYPE_CHECKING:
     from agvsim.scenario_schema import LimitsConfig, Scenario, WorldConfig
 
+MAX_MAGNITUDE = 1e12  # of any float in a scenario: squares stay finite, float32 holds it
+
+
+def too_large(value: Any) -> float | None:
+    """The first float in ``value`` (a number, or a list / tuple of them, nested) whose
+    magnitude is over MAX_MAGNITUDE, or None."""
+    if isinstance(value, float):
+        return value if abs(value) > MAX_MAGNITUDE else None
+    if isinstance(value, list | tuple):
+        for v in value:
+            if (bad := too_large(v)) is not None:
+                return bad
+    return None
+
+
 RUN_LIMITS = (
     "max_steps",
     "max_robots",

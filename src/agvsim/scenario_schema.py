@@ -27,6 +27,7 @@ from agvsim.behaviours import BEHAVIOURS
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
+from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
 from agvsim.sim.spec import ControlMode
 
 
@@ -35,6 +36,14 @@ class _Strict(BaseModel):
     model_config = ConfigDict(
         extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=100_000
     )
+
+    @field_validator("*")
+    @classmethod
+    def _not_huge(cls, value: Any) -> Any:
+        if (bad := too_large(value)) is not None:
+            item = f"{bad!r} is " if isinstance(value, list | tuple) else ""
+            raise ValueError(f"{item}too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
+        return value
 
 
 # Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
@@ -342,7 +351,7 @@ class RobotConfig(_Strict):
 
         if not is_color_like(value):
             raise ValueError(
-                f"{value!r} is not a colour (allowed: '#rrggbb', '#rgb' or a matplotlib colour "
+                "not a colour (allowed: '#rrggbb', '#rgb' or a matplotlib colour "
                 "name such as 'red' or 'tab:blue')"
             )
         return value
