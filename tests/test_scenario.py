@@ -126,6 +126,49 @@ CASES = [
         ["'wandr' is not defined", "did you mean 'wander'?"],
     ),
     ("not_a_mapping.yaml", r"not_a_mapping\.yaml", ["must hold a mapping of keys", "got list"]),
+    # issue 13: tracebacks, hangs and silent acceptance found by fuzzing
+    ("latin1_text.yaml", r"\bline 2\b", ["byte 0xe9 is not UTF-8 text", "save the file as UTF-8"]),
+    ("utf16_text.yaml", r"utf16_text\.yaml", ["the file is UTF-16 text", "save it as UTF-8"]),
+    (
+        "alias_bomb_robots.yaml",
+        r"\bline 19\b",
+        ["more than 1,000,000 values", "aliases expand", "yaml_max_nodes"],
+    ),
+    ("nan_pose.yaml", r"robots\[0\]\.pose\.x_m\b", ["finite number", "nan"]),
+    ("inf_box.yaml", r"world\.boxes\[0\]\.length_m\b", ["finite number", "inf"]),
+    (
+        "bad_colour.yaml",
+        r"robots\[0\]\.color\b",
+        ["not a colour", "'#rrggbb'", "matplotlib colour name", "(got 'not-a-colour')"],
+    ),
+    ("negative_seed.yaml", r"\bseed\b", ["greater than or equal to 0", "-5"]),
+    (
+        "huge_goal_cell.yaml",
+        r"robots\[0\]\.controller(\.maze_solver)?\.goal_cell\[0\]",
+        ["exceeded maximum size", "1e+40"],
+    ),
+    (
+        "tiny_dt.yaml",
+        r"\bduration_s\b",
+        ["50,000,000,000 steps", "max_steps = 10,000,000", "limits: {max_steps: 50000000000}"],
+    ),
+    (
+        "huge_random_maze.yaml",
+        r"\bworld\.random\b",
+        ["50,050 x 50,050", "max_grid_cells = 25,000,000", "--limit max_grid_cells="],
+    ),
+    (
+        "camera_4k_1khz.yaml",
+        r"\bsensors\b",
+        ["16,777,216,000 pixels", "max_camera_pixels_per_s = 100,000,000"],
+    ),
+    ("inf_noise.yaml", r"robots\[0\]\.sensors\[0\](\.lidar)?\.noise_std_m\b", ["finite"]),
+    ("nan_reach_goal.yaml", r"\bmetrics\.reach\.y_m\b", ["finite number"]),
+    ("nan_script_twist.yaml", STEP0 + r"\.twist\[0\]", ["finite number", "nan"]),
+    ("inf_script_wheels.yaml", STEP0 + r"\.wheels\[1\]", ["finite number", "-inf"]),
+    ("long_robot_name.yaml", r"robots\[0\]\.name\b", ["at most 64 characters", "(202 chars)"]),
+    ("limits_key_typo.yaml", r"\blimits\.max_step\b", ["did you mean 'max_steps'?"]),
+    ("inf_model_param.yaml", r"robots\[0\]\.params\b", ["wheel_radius_m", "finite number"]),
 ]
 
 # Faults that were once reported badly (kept apart as regression cases).

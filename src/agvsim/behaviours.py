@@ -25,9 +25,9 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from agvsim.control.api import ControllerContext
 from agvsim.control.explorer import TremauxExplorer
@@ -39,13 +39,29 @@ from agvsim.control.pure_pursuit import PurePursuit
 from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
 from agvsim.control.wall_follow import WallFollower
+from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
+
+_Cell = Annotated[int, Field(ge=0, le=10_000_000)]  # numba takes 64-bit integers only
+
+
+class _Config(BaseModel):
+    """Every behaviour config: unknown keys, NaN / inf, huge numbers and long text refused."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=200)
+
+    @field_validator("*")
+    @classmethod
+    def _not_huge(cls, value: Any) -> Any:
+        if (bad := too_large(value)) is not None:
+            item = f"{bad!r} is " if isinstance(value, list | tuple) else ""
+            raise ValueError(f"{item}too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
+        return value
 
 
 # ---------------------------------------------------------------------------------- goal
-class GoalConfig(BaseModel):
+class GoalConfig(_Config):
     """``controller: {type: goto_goal, goal_x_m: 3, goal_y_m: -2}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     type: Literal["goto_goal"]
     goal_x_m: float
     goal_y_m: float
@@ -62,10 +78,9 @@ class GoalConfig(BaseModel):
     pose_source: PoseSource = "true_pose"
 
 
-class WaypointsConfig(BaseModel):
+class WaypointsConfig(_Config):
     """``controller: {type: waypoints, points: [[0, 0], [3, 0], [3, 3]], loop: true}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     type: Literal["waypoints"]
     points: list[tuple[float, float]] = Field(min_length=1, description="[x_m, y_m] each")
     loop: bool = False
@@ -107,13 +122,12 @@ def build_waypoints(cfg: WaypointsConfig, ctx: ControllerContext) -> PurePursuit
 
 
 # ---------------------------------------------------------------------------------- maze
-class MazeSolverConfig(BaseModel):
+class MazeSolverConfig(_Config):
     """``controller: {type: maze_solver, goal_cell: [17, 17], method: astar}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     type: Literal["maze_solver"]
     method: Literal["astar", "tremaux"] = "astar"
-    goal_cell: tuple[int, int] | None = Field(None, description="[row, col] of the map grid")
+    goal_cell: tuple[_Cell, _Cell] | None = Field(None, description="[row, col] of the map grid")
     goal_x_m: float | None = None
     goal_y_m: float | None = None
     speed_m_s: float = Field(0.8, gt=0, le=100)
@@ -184,10 +198,9 @@ def build_maze_solver(
 
 
 # ---------------------------------------------------------------------------------- pursuit
-class PursueConfig(BaseModel):
+class PursueConfig(_Config):
     """``controller: {type: pursue, target: blue, ...}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     type: Literal["pursue"]
     target: str = Field(min_length=1, description="the robot to catch (list it in 'knows')")
     reorient_deg: float = Field(22.5, gt=0, lt=180, description="turn on the spot beyond this")
@@ -198,10 +211,9 @@ class PursueConfig(BaseModel):
     wall_margin_m: float = Field(0.12, ge=0, le=10, description="clearance kept from walls")
 
 
-class EvadeConfig(BaseModel):
+class EvadeConfig(_Config):
     """``controller: {type: evade, pursuer: red, ...}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     type: Literal["evade"]
     pursuer: str = Field(min_length=1, description="the robot to flee (list it in 'knows')")
     alert_distance_m: float = Field(4.0, gt=0, le=1000)
@@ -265,10 +277,9 @@ def build_evade(cfg: EvadeConfig, ctx: ControllerContext) -> Evader:
 
 
 # ---------------------------------------------------------------------------------- teleop
-class TeleopConfig(BaseModel):
+class TeleopConfig(_Config):
     """``controller: {type: teleop, deadman_s: 0.5}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     type: Literal["teleop"]
     deadman_s: float = Field(0.5, gt=0, le=3600)
     linear_speed_m_s: float = Field(0.5, gt=0, le=100)
@@ -292,10 +303,8 @@ def build_teleop(cfg: TeleopConfig, ctx: ControllerContext) -> Teleop:
 
 # ---------------------------------------------------------------------------------- registry
 # Behaviours that bring their own config and builder: config class -> build(config, ctx)
-class WallFollowConfig(BaseModel):
+class WallFollowConfig(_Config):
     """``controller: {type: wall_follow, side: left, ...}`` in a scenario."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     type: Literal["wall_follow"]
     side: Literal["left", "right"] = "left"
@@ -339,12 +348,11 @@ def build_wall_follow(cfg: WallFollowConfig, ctx: ControllerContext) -> WallFoll
 
 
 # ---------------------------------------------------------------------------------- camera
-class MarkerSearchConfig(BaseModel):
+class MarkerSearchConfig(_Config):
     """``controller: {type: marker_search, marker_id: 3, stop_distance_m: 0.8}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     type: Literal["marker_search"]
-    marker_id: int = Field(ge=0, description="the ArUco / AprilTag id to find")
+    marker_id: int = Field(ge=0, le=1_000_000, description="the ArUco / AprilTag id to find")
     dictionary: Literal[
         "4x4_50", "4x4_100", "4x4_250", "4x4_1000", "5x5_50", "5x5_100", "5x5_250", "5x5_1000",
         "6x6_50", "6x6_100", "6x6_250", "6x6_1000", "7x7_50", "7x7_100", "7x7_250", "7x7_1000",

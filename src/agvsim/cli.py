@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -119,15 +120,57 @@ def replay(
         raise typer.Exit(1) from None
 
 
+def _finite_duration(value: float | None) -> float | None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"{value!r} is not allowed (a finite number of seconds > 0)")
+    return value
+
+
+LIMIT_HELP = (
+    "Raise a limit, NAME=VALUE (repeatable): max_steps, max_robots, max_grid_cells, "
+    "max_camera_pixels_per_s, max_lidar_rays_per_s, yaml_max_bytes, yaml_max_nodes, "
+    "yaml_max_depth (docs/scenario.md, 'Limits')."
+)
+
+
+def _load(scenario: Path, limit: list[str] | None, duration: float | None = None):
+    """The validated scenario (limits applied; a --duration checked against max_steps);
+    exits with code 2 and a clear message when it is not valid."""
+    from agvsim.scenario import ScenarioError, load_scenario
+    from agvsim.scenario_limits import Limits, steps_of
+
+    try:
+        limits = Limits.from_options(limit)
+    except ValueError as e:
+        _fail("error", e)
+        raise typer.Exit(2) from None
+    try:
+        sc = load_scenario(scenario, limits)
+        if duration is not None:
+            steps_of(duration, sc.dt_s, sc._limits, "--duration")
+    except ScenarioError as e:
+        _fail("error", e)
+        raise typer.Exit(2) from None
+    except ValueError as e:
+        _fail("error", f"{scenario}: {e}")
+        raise typer.Exit(2) from None
+    return sc
+
+
 @app.command()
 def run(
     scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
     duration: Annotated[
-        float | None, typer.Option(help="Simulated seconds (overrides file).")
+        float | None,
+        typer.Option(help="Simulated seconds (overrides file).", callback=_finite_duration),
     ] = None,
-    seed: Annotated[int | None, typer.Option(help="Random seed (overrides file).")] = None,
+    seed: Annotated[
+        int | None, typer.Option(help="Random seed (overrides file).", min=0, max=2**63 - 1)
+    ] = None,
     out_dir: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("runs/latest"),
-    record_every: Annotated[int, typer.Option(help="Write a trajectory row every N steps.")] = 1,
+    record_every: Annotated[
+        int, typer.Option(help="Write a trajectory row every N steps.", min=1)
+    ] = 1,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="Skip plot.png.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     no_mcap: Annotated[
@@ -136,6 +179,7 @@ def run(
     video: Annotated[
         bool, typer.Option("--video", help="Also write top.mp4 (and one MP4 per camera).")
     ] = False,
+    limit: Annotated[list[str] | None, typer.Option(help=LIMIT_HELP, metavar="NAME=VALUE")] = None,
 ) -> None:
     """Run a scenario headless; write summary.json, trajectory.csv, plot.png and run.mcap
     (ROS 2 recording, see docs/recording.md) to --out."""
@@ -159,10 +203,11 @@ def run(
     def tick(t: float, total: float) -> None:
         progress.update(task, completed=t / total, t=f"{t:7.1f} / {total:.1f} s")
 
+    sc = _load(scenario, limit, duration)
     try:
         with progress:
             data = run_scenario(
-                scenario,
+                sc,
                 out_dir,
                 duration,
                 seed,
@@ -210,12 +255,16 @@ def run(
 
 
 @app.command()
-def validate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")]) -> None:
-    """Check a scenario file (schema, map, robot placement) without running it."""
-    from agvsim.scenario import ScenarioError, build, load_scenario
+def validate(
+    scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
+    limit: Annotated[list[str] | None, typer.Option(help=LIMIT_HELP, metavar="NAME=VALUE")] = None,
+) -> None:
+    """Check a scenario file (schema, map, robot placement, limits) without running it."""
+    from agvsim.scenario import ScenarioError, build
 
+    sc = _load(scenario, limit)
     try:
-        build(load_scenario(scenario))
+        build(sc)
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None

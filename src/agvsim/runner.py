@@ -15,6 +15,7 @@ import numpy as np
 
 from agvsim.record.outputs import TrajectoryWriter, summary, write_summary
 from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
+from agvsim.scenario_limits import Limits, steps_of
 from agvsim.sim.engine import ControllerError, Simulation
 
 if TYPE_CHECKING:
@@ -37,7 +38,7 @@ def run_scenario(
     outputs are written and the exception re-raised. ``record_mcap`` streams ``run.mcap``
     (ROS 2 layouts, docs/recording.md); ``video`` writes ``top.mp4`` and camera videos."""
     if isinstance(scenario, Scenario):
-        sc, source = scenario, "scenario"
+        sc, source = scenario, scenario._source
     else:
         source = str(scenario)
         sc = load_scenario(scenario)
@@ -48,9 +49,10 @@ def run_scenario(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     total = float(duration_s if duration_s is not None else sc.duration_s)
-    if not total > 0:
-        raise ScenarioError(source, [f"duration must be > 0 s, got {total}"])
-    n_steps = int(round(total / sim.dt_s))
+    try:  # finite, > 0 and within the scenario's max_steps
+        n_steps = steps_of(total, sim.dt_s, sc._limits or Limits(), "duration")
+    except ValueError as err:
+        raise ScenarioError(source, [str(err)]) from None
     metrics = build_metrics(sc, sim, source)
     slams = build_slams(sc, sim, source)
     writer = TrajectoryWriter(out / "trajectory.csv", sim, record_every)

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import importlib.util
 import inspect
+import math
 from dataclasses import fields as dc_fields
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from pydantic import ValidationError
 
 from agvsim.behaviours import BEHAVIOURS
@@ -23,6 +24,8 @@ from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
+from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file
+from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
 from agvsim.scenario_schema import (
     AvoidConfig,
     CameraConfig,
@@ -65,39 +68,92 @@ class ScenarioError(ValueError):
         return f"{self.source} is not a valid scenario:\n{lines}"
 
 
-def parse_scenario(data: Any, source: str = "scenario") -> Scenario:
+def parse_scenario(
+    data: Any,
+    source: str = "scenario",
+    limits: Limits | None = None,
+    *,
+    limits_from_file: bool = True,
+) -> Scenario:
+    """Validate a scenario's data (a dict, as from YAML) and check it against ``limits``
+    (default: :class:`~agvsim.scenario_limits.Limits()`), which the scenario's own ``limits:``
+    block raises unless ``limits_from_file`` is False (data from an untrusted place)."""
     if not isinstance(data, dict):
         raise ScenarioError(
             source, [f"the file must hold a mapping of keys, got {type(data).__name__}"]
         )
+    _count_robots_first(data, limits or Limits(), limits_from_file, source)
     try:
-        return Scenario.model_validate(data)
+        sc = Scenario.model_validate(data)
     except ValidationError as err:
         raise ScenarioError(source, _format_errors(err)) from None
+    except RecursionError:  # data built in Python, nested past what any reader allows
+        raise ScenarioError(source, ["the data is nested too deeply"]) from None
+    effective = (limits or Limits()).with_block(sc.limits, limits_from_file, source)
+    problems = check_scenario(sc, effective)
+    if problems:
+        raise ScenarioError(source, problems)
+    sc._limits = effective
+    return sc
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file."""
+def _count_robots_first(data: dict, limits: Limits, from_file: bool, source: str) -> None:
+    """Refuse a huge robot list before validating it (validation costs ~50 us a robot)."""
+    robots, block = data.get("robots"), data.get("limits")
+    if not isinstance(robots, list):
+        return
+    raised = block.get("max_robots") if from_file and isinstance(block, dict) else None
+    if isinstance(raised, int) and not isinstance(raised, bool) and raised > limits.max_robots:
+        limits = replace(limits, max_robots=raised)
+    try:
+        check_robot_count(len(robots), limits)
+    except ValueError as err:
+        raise ScenarioError(source, [str(err)]) from None
+
+
+def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
+    """Read and validate a scenario YAML file (UTF-8, within ``limits``; see
+    :mod:`agvsim.scenario_limits`)."""
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(str(path), ["no such file"])
+    limits = limits or Limits()
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        line = f"line {mark.line + 1}: " if mark is not None else ""
-        raise ScenarioError(
-            str(path), [f"{line}not valid YAML ({getattr(err, 'problem', err)})"]
-        ) from None
-    scenario = parse_scenario(data, str(path))
+        data = load_yaml_file(path, limits.yaml)
+    except YamlInputError as err:
+        raise ScenarioError(str(path), [_yaml_problem(err)]) from None
+    scenario = parse_scenario(data, str(path), limits)
     scenario._base_dir = path.parent
     scenario._source = str(path)
     return scenario
 
 
+def scenario_from_text(
+    text: str | bytes,
+    source: str,
+    limits: Limits | None = None,
+    *,
+    limits_from_file: bool = False,
+) -> Scenario:
+    """A scenario from YAML text (an upload): the same checks as :func:`load_scenario`; by
+    default the text's ``limits:`` block may lower the limits but not raise them."""
+    limits = limits or Limits()
+    try:
+        data = load_yaml(text, source, limits.yaml)
+    except YamlInputError as err:
+        raise ScenarioError(source, [_yaml_problem(err)]) from None
+    return parse_scenario(data, source, limits, limits_from_file=limits_from_file)
+
+
+def _yaml_problem(err: YamlInputError) -> str:
+    hint = "; put a large map in a map file (world.file)" if "yaml_max_" in err.problem else ""
+    return (f"line {err.line}: " if err.line is not None else "") + err.problem + hint
+
+
 # ---------------------------------------------------------------------------------- building
-def build_grid(cfg: WorldConfig, base_dir: Path) -> OccupancyGrid:
+def build_grid(cfg: WorldConfig, base_dir: Path, limits: Limits | None = None) -> OccupancyGrid:
     res, origin = cfg.cell_size_m, cfg.origin_xy_m
+    limits = limits or Limits()
     if cfg.maze:
         grid = mazes.thesis_maze(cfg.maze, resolution_m=res)
     elif cfg.matrix is not None:
@@ -106,6 +162,9 @@ def build_grid(cfg: WorldConfig, base_dir: Path) -> OccupancyGrid:
         return loaders.parse_text_picture(cfg.picture, res, origin, source="world.picture")
     elif cfg.random is not None:
         r = cfg.random
+        pitch = r.corridor_cells + r.wall_cells
+        rows, cols = r.rows * pitch + r.wall_cells, r.cols * pitch + r.wall_cells
+        check_grid_cells(rows, cols, limits, "world.random")
         grid = mazes.random_maze(
             r.rows,
             r.cols,
@@ -125,6 +184,7 @@ def build_grid(cfg: WorldConfig, base_dir: Path) -> OccupancyGrid:
             path,
             resolution_m=res if "cell_size_m" in given else None,
             origin_xy_m=origin if "origin_xy_m" in given else None,
+            max_cells=limits.max_grid_cells,
         )
     if origin is not None:
         grid = OccupancyGrid(grid.occupied, grid.resolution_m, origin)
@@ -148,6 +208,10 @@ def _model(rc: RobotConfig, where: str) -> Any:
         numeric = isinstance(default, int | float | np.floating)
         if numeric and (isinstance(v, str | bool) or not isinstance(v, int | float)):
             raise ScenarioError("", [f"{where}.params.{k}: must be a number, got {v!r}"])
+        if numeric and not (math.isfinite(v) and abs(v) <= 1e12):
+            raise ScenarioError(
+                "", [f"{where}.params.{k}: {v!r} is not allowed (a finite number, |x| <= 1e12)"]
+            )
         if not numeric and not isinstance(v, str):
             raise ScenarioError("", [f"{where}.params.{k}: must be text, got {v!r}"])
         kwargs[k] = v
@@ -176,8 +240,6 @@ def _sensor(
             "lidar", sc.beams, float(np.deg2rad(sc.fov_deg)), sc.range_max_m, amin, **common
         )
     if sc.name:
-        from dataclasses import replace
-
         spec = replace(spec, name=sc.name)
     return spec
 
@@ -469,10 +531,15 @@ def build(sc: Scenario, seed: int | None = None, base_dir: Path | None = None) -
 
 def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     base = base_dir or sc._base_dir
+    if seed is not None and (
+        isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed < 2**63
+    ):
+        raise ScenarioError("", [f"seed: {seed!r} is not allowed (an integer 0 .. 2^63 - 1)"])
     try:
-        grid = build_grid(sc.world, base)
+        grid = build_grid(sc.world, base, sc._limits)
     except (loaders.MapFormatError, ValueError) as err:
-        raise ScenarioError("", [f"world: {err}"]) from None
+        msg = str(err)
+        raise ScenarioError("", [msg if msg.startswith("world.") else f"world: {msg}"]) from None
     boxes = np.array(
         [
             (b.x_m, b.y_m, np.deg2rad(b.theta_deg), b.length_m / 2, b.width_m / 2)

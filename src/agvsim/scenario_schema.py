@@ -7,28 +7,57 @@ Loading and building live in ``agvsim.scenario``, which re-exports the names imp
 from __future__ import annotations
 
 import difflib
+import math
 import re
+from collections import Counter
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
+from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
 from agvsim.sim.spec import ControlMode
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # NaN and inf are refused in every float; text is bounded (names are shorter still)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=100_000
+    )
+
+    @field_validator("*")
+    @classmethod
+    def _not_huge(cls, value: Any) -> Any:
+        if (bad := too_large(value)) is not None:
+            item = f"{bad!r} is " if isinstance(value, list | tuple) else ""
+            raise ValueError(f"{item}too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
+        return value
+
+
+# Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
+Seed = Annotated[int, Field(ge=0, le=2**63 - 1, description="0 .. 2^63 - 1")]
+Cell = Annotated[int, Field(ge=0, le=10_000_000)]
+Name = Annotated[str, Field(min_length=1, max_length=64)]
+PathText = Annotated[str, Field(min_length=1, max_length=4096)]
 
 
 # ---------------------------------------------------------------------------------- world
 class RandomMaze(_Strict):
     rows: int = Field(8, ge=1, le=500, description="rooms north-south")
     cols: int = Field(8, ge=1, le=500, description="rooms west-east")
-    seed: int = 0
+    seed: Seed = 0
     corridor_cells: int = Field(2, ge=1, le=50)
     wall_cells: int = Field(1, ge=1, le=50)
     loop_fraction: float = Field(0.0, ge=0.0, le=1.0)
@@ -47,8 +76,8 @@ RGBConfig = tuple[Byte, Byte, Byte]
 
 
 class PaintConfig(_Strict):
-    rows: tuple[int, int] = Field(description="first and last row (inclusive), row 0 = north")
-    cols: tuple[int, int] = Field(description="first and last column (inclusive)")
+    rows: tuple[Cell, Cell] = Field(description="first and last row (inclusive), row 0 = north")
+    cols: tuple[Cell, Cell] = Field(description="first and last column (inclusive)")
     rgb: RGBConfig
 
 
@@ -66,7 +95,7 @@ class ColorsConfig(_Strict):
 
 class _MarkerCommon(_Strict):
     face: Literal["north", "east", "south", "west"]
-    cell: tuple[int, int] | None = Field(None, description="[row, col] of the wall cell")
+    cell: tuple[Cell, Cell] | None = Field(None, description="[row, col] of the wall cell")
     x_m: float | None = None
     y_m: float | None = None
     offset_m: float = Field(0.0, description="along the face, to the right seen from the front")
@@ -74,7 +103,7 @@ class _MarkerCommon(_Strict):
     center_z_m: float | None = Field(
         None, ge=0, description="height of the centre; default: half the wall"
     )
-    name: str | None = Field(None, min_length=1)
+    name: Name | None = None
 
     @model_validator(mode="after")
     def _one_place(self) -> _MarkerCommon:
@@ -87,7 +116,7 @@ class _MarkerCommon(_Strict):
 
 class ArucoMarkerConfig(_MarkerCommon):
     kind: Literal["aruco"]
-    id: int = Field(ge=0)
+    id: int = Field(ge=0, le=1_000_000)
     dictionary: Literal[
         "4x4_50", "4x4_100", "4x4_250", "4x4_1000", "5x5_50", "5x5_100", "5x5_250", "5x5_1000",
         "6x6_50", "6x6_100", "6x6_250", "6x6_1000", "7x7_50", "7x7_100", "7x7_250", "7x7_1000",
@@ -97,7 +126,7 @@ class ArucoMarkerConfig(_MarkerCommon):
 
 class AprilTagMarkerConfig(_MarkerCommon):
     kind: Literal["apriltag"]
-    id: int = Field(ge=0)
+    id: int = Field(ge=0, le=1_000_000)
     family: Literal["16h5", "25h9", "36h10", "36h11"] = "36h11"
 
 
@@ -120,8 +149,10 @@ MarkerConfig = Annotated[
 class WorldConfig(_Strict):
     maze: Literal["thesis_fig16", "thesis_c1"] | None = None
     matrix: list[list[int]] | None = None
-    picture: str | None = Field(None, description="text picture: '#' wall, '.' free")
-    file: str | None = Field(None, description=".txt .csv .png .pgm or ROS map .yaml")
+    picture: str | None = Field(
+        None, max_length=64 * 1024 * 1024, description="text picture: '#' wall, '.' free"
+    )
+    file: PathText | None = Field(None, description=".txt .csv .png .pgm or ROS map .yaml")
     random: RandomMaze | None = None
     cell_size_m: float = Field(1.0, gt=0, le=100)
     origin_xy_m: tuple[float, float] | None = None
@@ -154,7 +185,7 @@ class Body(_Strict):
 
 
 class SensorCommon(_Strict):
-    name: str | None = None
+    name: Name | None = None
     rate_hz: float | None = Field(None, gt=0, le=10000)
     range_min_m: float = Field(0.0, ge=0)
     noise_std_m: float = Field(0.0, ge=0)
@@ -181,7 +212,7 @@ class CameraConfig(_Strict):
     """The onboard camera: RGB and depth images (agvsim.sensors.camera)."""
 
     type: Literal["camera"]
-    name: str | None = None
+    name: Name | None = None
     width_px: int = Field(320, ge=8, le=4096)
     height_px: int = Field(240, ge=8, le=4096)
     hfov_deg: float = Field(60.0, gt=0, lt=170)
@@ -241,8 +272,10 @@ class AvoidConfig(_Strict):
 
 class PythonControllerConfig(_Strict):
     type: Literal["python"]
-    file: str = Field(description="a .py file next to the scenario (or an absolute path)")
-    name: str = Field("controller", description="function or class defined in the file")
+    file: PathText = Field(description="a .py file next to the scenario (or an absolute path)")
+    name: str = Field(
+        "controller", min_length=1, max_length=200, description="function or class in the file"
+    )
 
 
 class IdleConfig(_Strict):
@@ -266,7 +299,7 @@ class MetricsConfig(_Strict):
 class SlamBlock(_Strict):
     """Online graph SLAM on one of the robot's lidars and its wheel odometry (agvsim.slam)."""
 
-    sensor: str = Field("lidar", description="the lidar (range fan) whose scans SLAM reads")
+    sensor: Name = Field("lidar", description="the lidar (range fan) whose scans SLAM reads")
     resolution_m: float = Field(0.05, gt=0.005, le=1.0, description="map cell size (20 cells/m)")
     max_range_m: float | None = Field(
         None, gt=0, description="readings used up to this range; default: the sensor's maximum"
@@ -281,26 +314,67 @@ class SlamBlock(_Strict):
 
 
 class RobotConfig(_Strict):
-    name: str = Field(min_length=1)
+    name: Name
     model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
     mode: ControlMode = ControlMode.INVERSE
-    params: dict[str, float | str] = Field({}, description="model parameters, see `agvsim models`")
+    params: dict[Name, Any] = Field({}, description="model parameters, see `agvsim models`")
     body: Body = Body()
     pose: Pose = Pose()
-    color: str = "#d62728"
+    color: str = Field("#d62728", max_length=64)
     sensors: list[SensorConfig] = []
     odometry: OdometryConfig = OdometryConfig()
     controller: ControllerConfig = IdleConfig(type="idle")
-    knows: list[str] = Field(
+    knows: list[Name] = Field(
         [], description="robots whose true pose this robot's controller sees (obs.others)"
     )
     slam: SlamBlock | None = None
 
+    @field_validator("params")
+    @classmethod
+    def _numbers_or_text(cls, params: dict[str, Any]) -> dict[str, Any]:
+        for key, value in params.items():
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            if number and not math.isfinite(value):
+                raise ValueError(f"{key}: must be a finite number (NaN and inf are not allowed)")
+            if not (number or (isinstance(value, str) and len(value) <= 200)):
+                raise ValueError(
+                    f"{key}: must be a number or a short text, got {short_repr(value)}"
+                )
+        return params
+
+    @field_validator("color")
+    @classmethod
+    def _a_colour(cls, value: str) -> str:
+        if re.fullmatch(r"#([0-9a-fA-F]{3}|[0-9a-fA-F]{6})", value):
+            return value
+        from matplotlib.colors import is_color_like  # names: only when one is given
+
+        if not is_color_like(value):
+            raise ValueError(
+                "not a colour (allowed: '#rrggbb', '#rgb' or a matplotlib colour "
+                "name such as 'red' or 'tab:blue')"
+            )
+        return value
+
+
+class LimitsConfig(_Strict):
+    """The scenario raising (or lowering) its own run limits; see agvsim.scenario_limits."""
+
+    max_steps: int | None = Field(None, ge=1, le=10**15, description="duration_s / dt_s")
+    max_robots: int | None = Field(None, ge=1, le=10**9, description="robots in the scenario")
+    max_grid_cells: int | None = Field(None, ge=1, le=10**12, description="map rows x cols")
+    max_camera_pixels_per_s: float | None = Field(
+        None, gt=0, description="width x height x rate, all cameras"
+    )
+    max_lidar_rays_per_s: float | None = Field(
+        None, gt=0, description="beams x rate, all range sensors"
+    )
+
 
 class Scenario(_Strict):
-    name: str = "unnamed scenario"
-    description: str = ""
-    seed: int = 0
+    name: str = Field("unnamed scenario", max_length=200)
+    description: str = Field("", max_length=20_000)
+    seed: Seed = 0
     duration_s: float = Field(60.0, gt=0, le=1e7)
     dt_s: float = Field(0.02, gt=0, le=1.0)
     world: WorldConfig
@@ -309,18 +383,22 @@ class Scenario(_Strict):
     on_controller_error: Literal["stop_run", "stop_robot"] = Field(
         "stop_run", description="a failing controller ends the run, or only stops its robot"
     )
+    limits: LimitsConfig | None = Field(None, description="raise the run's resource limits")
     _base_dir: Path = PrivateAttr(default=Path("."))
     _source: str = PrivateAttr(default="scenario")
+    _limits: Any = PrivateAttr(default=None)  # the Limits it was checked against
 
     @model_validator(mode="after")
     def _unique_names(self) -> Scenario:
         names = [r.name for r in self.robots]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        counts = Counter(names)  # not names.count(): 100,000 robots must not take minutes
+        dup = sorted(n for n, c in counts.items() if c > 1)
         if dup:
-            raise ValueError(f"robot names must be unique; repeated: {dup}")
+            shown = dup[:20] + ([f"... {len(dup) - 20} more"] if len(dup) > 20 else [])
+            raise ValueError(f"robot names must be unique; repeated: {shown}")
         for k, r in enumerate(self.robots):
             for other in r.knows:
-                if other not in names or other == r.name:
+                if other not in counts or other == r.name:
                     raise ValueError(
                         f"robots[{k}].knows: {other!r} is not another robot"
                         + _did_you_mean(other, [n for n in names if n != r.name])
@@ -334,8 +412,10 @@ def _loc(loc: tuple) -> str:
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        else:
-            out += ("." if out else "") + str(part)
+        else:  # a key that is not a plain name (a user's odd key) is quoted
+            text = str(part)
+            plain = re.fullmatch(r"[\w\-]{1,64}", text) or text.startswith("'")
+            out += ("." if out else "") + (text if plain else short_repr(text, 40))
     return out or "(top level)"
 
 
@@ -386,21 +466,36 @@ def _did_you_mean(word: str, options: list[str]) -> str:
     return f"{hint} (allowed: {', '.join(sorted(options))})"
 
 
+MAX_PROBLEMS = 30  # listed in one refusal; the rest are counted
+
+
+def short_repr(value: Any, limit: int = 80) -> str:
+    """``repr(value)``, cut to ``limit`` characters (a 5 MB name is not echoed back)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long to print
+        return f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[: limit - 12] + f"... ({len(text):,} chars)"
+
+
 def _format_errors(err: ValidationError) -> list[str]:
     out = []
-    for e in err.errors():
+    errors = err.errors()
+    for e in errors[:MAX_PROBLEMS]:
         loc = tuple(e["loc"])
         where = _loc(loc)
         if e["type"] == "extra_forbidden":
             key = str(loc[-1])
             out.append(
-                f"{where}: unknown key {key!r}" + _did_you_mean(key, _fields_at(Scenario, loc))
+                f"{where}: unknown key {short_repr(key)}"
+                + _did_you_mean(key, _fields_at(Scenario, loc))
             )
         elif e["type"] == "literal_error" and isinstance(e.get("input"), str):
             opts = re.findall(r"'([^']*)'", str(e.get("ctx", {}).get("expected", "")))
             close = difflib.get_close_matches(e["input"], opts, n=1, cutoff=0.6)
             hint = f"; did you mean {close[0]!r}?" if close else ""
-            out.append(f"{where}: {e['input']!r} is not allowed{hint} (allowed: {', '.join(opts)})")
+            shown = short_repr(e["input"])
+            out.append(f"{where}: {shown} is not allowed{hint} (allowed: {', '.join(opts)})")
         elif e["type"] == "missing":
             out.append(f"{where}: required field is missing")
         elif e["type"] == "union_tag_invalid":
@@ -408,12 +503,16 @@ def _format_errors(err: ValidationError) -> list[str]:
             tag = ctx.get("tag", "?")
             expected = ctx.get("expected_tags", "")
             opts = [t.strip(" '") for t in str(expected).split(",")]
-            out.append(f"{where}: unknown type {tag!r}" + _did_you_mean(str(tag), opts))
+            out.append(f"{where}: unknown type {short_repr(tag)}" + _did_you_mean(str(tag), opts))
         else:
             msg = e["msg"].removeprefix("Value error, ")
+            if e["type"] == "finite_number":
+                msg = "must be a finite number (NaN and inf are not allowed)"
             value = e.get("input")
-            shown = (
-                repr(value) if not isinstance(value, dict | list) or len(repr(value)) < 80 else ""
-            )
+            shown = short_repr(value) if not isinstance(value, dict | list) else ""
+            if isinstance(value, dict | list) and len(value) <= 8:
+                shown = short_repr(value)
             out.append(f"{where}: {msg}" + (f" (got {shown})" if shown else ""))
+    if len(errors) > MAX_PROBLEMS:
+        out.append(f"... and {len(errors) - MAX_PROBLEMS:,} more problems")
     return out

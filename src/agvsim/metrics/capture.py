@@ -50,7 +50,7 @@ class Capture:
 class CaptureConfig(BaseModel):
     """``metrics: {capture: {pursuer: red, evader: blue, radius_m: 0.8}}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     pursuer: str = Field(min_length=1, description="robot name")
     evader: str = Field(min_length=1, description="robot name")
     radius_m: float = Field(0.8, gt=0, le=1000, description="centre distance that counts")

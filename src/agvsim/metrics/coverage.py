@@ -196,7 +196,7 @@ def _mark_beams(occ, seen, ox, oy, angles, lengths, gx, gy, res) -> None:
 class CoverageConfig(BaseModel):
     """``metrics: {coverage: {robot: agv1}}``: cells visited and seen, return to the start."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     robot: str = Field(min_length=1, description="robot name")
     sensor: str | None = Field(None, description="sensor whose beams see (default: most beams)")
     end_run: bool = Field(True, description="stop the run when back at the start")

@@ -51,7 +51,7 @@ class Reach:
 class ReachConfig(BaseModel):
     """``metrics: {reach: {robot: agv1, x_m: 4.5, y_m: -4.5, radius_m: 0.5}}``"""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     robot: str = Field(min_length=1, description="robot name")
     x_m: float = Field(description="goal, world frame")
     y_m: float = Field(description="goal, world frame")

@@ -12,12 +12,15 @@ simulator, so the offline SLAM can use it.
 
 from __future__ import annotations
 
+import functools
 import shutil
 import tempfile
 import warnings
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -29,6 +32,29 @@ __all__ = ["GridMessage", "Recording", "RecordingError", "ScanSeries"]
 
 class RecordingError(ValueError):
     """A recording that cannot be read, or a topic it does not hold."""
+
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _reading(method: _F) -> _F:
+    """Whatever a damaged file makes the decoder raise (struct, index, type, rosbags' own
+    errors) becomes a RecordingError naming the file, the topic and the problem."""
+
+    @functools.wraps(method)
+    def wrapper(self: Recording, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return method(self, *args, **kwargs)
+        except RecordingError:
+            raise
+        except Exception as err:  # noqa: BLE001 - any decoding failure of a damaged file
+            topic = f" {args[0]}:" if args and isinstance(args[0], str) else ""
+            raise RecordingError(
+                f"{self.path}:{topic} the recording is damaged and cannot be decoded "
+                f"({type(err).__name__}: {str(err)[:200]})"
+            ) from None
+
+    return wrapper  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
@@ -105,7 +131,11 @@ class Recording:
             return self.path, None
         tmpdir = tempfile.mkdtemp(prefix="agvsim-mcap-")
         fixed = Path(tmpdir) / "repaired.mcap"
-        repair(self.path, fixed)
+        try:
+            repair(self.path, fixed)
+        except (ValueError, OSError) as err:
+            shutil.rmtree(tmpdir, ignore_errors=True)
+            raise RecordingError(f"{self.path}: cut off and cannot be repaired: {err}") from None
         self.repaired = True
         warnings.warn(
             f"{self.path} was cut off (no footer); reading the complete part",
@@ -121,6 +151,7 @@ class Recording:
     def count(self, topic: str) -> int:
         return len(self._raw.get(topic, ()))
 
+    @_reading
     def messages(self, topic: str, type_name: str | None = None) -> list[tuple[float, object]]:
         """(log time s, decoded message) of every message on ``topic``."""
         if topic not in self.types:
@@ -153,6 +184,7 @@ class Recording:
         nsec = np.ascontiguousarray(block[:, 8:12]).view("<u4")[:, 0].astype(np.float64)
         return sec + nsec * 1e-9
 
+    @_reading
     def odometry(self, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``nav_msgs/Odometry``: header stamps (T,), planar poses (T, 3) x, y, yaw and body
         twists (T, 3) vx, vy, omega."""
@@ -179,6 +211,7 @@ class Recording:
         ).reshape(-1, 3)
         return t, poses, tw
 
+    @_reading
     def laser_scans(self, topic: str) -> ScanSeries:
         """Every scan of a ``sensor_msgs/LaserScan`` topic (all with the same beam count)."""
         if self.count(topic) == 0:
@@ -215,6 +248,7 @@ class Recording:
             range_max_m=float(first.range_max),
         )
 
+    @_reading
     def occupancy(self, topic: str = "/map") -> list[GridMessage]:
         out = []
         for t, m in self.messages(topic, OCCUPANCY_GRID):
@@ -231,10 +265,12 @@ class Recording:
             )
         return out
 
+    @_reading
     def strings(self, topic: str) -> tuple[np.ndarray, list[str]]:
         msgs = self.messages(topic, STRING)
         return np.array([t for t, _ in msgs]), [m.data for _, m in msgs]
 
+    @_reading
     def static_transforms(self) -> dict[str, tuple[str, float, float, float]]:
         """child frame -> (parent frame, x, y, yaw) from ``/tf_static`` (the planar part: a
         camera's height and pitch are left out)."""
@@ -254,18 +290,27 @@ class Recording:
 
     # ------------------------------------------------------------------ agvsim layout
     @property
+    @_reading
     def scenario_yaml(self) -> str | None:
         """The scenario stored by ``agvsim run`` (``/agvsim/scenario``), or None."""
         if "/agvsim/scenario" not in self.types:
             return None
         return self.strings("/agvsim/scenario")[1][0]
 
+    @_reading
     def scenario_dict(self) -> dict | None:
-        import yaml
+        """The stored scenario as data (read within the scenario loader's YAML limits)."""
+        from agvsim.safe_yaml import load_yaml
 
         text = self.scenario_yaml
-        return None if text is None else yaml.safe_load(text)
+        if text is None:
+            return None
+        data = load_yaml(text, f"{self.path} (/agvsim/scenario)")
+        if not isinstance(data, dict) or not isinstance(data.get("robots", []), list):
+            raise RecordingError(f"{self.path}: the stored scenario is not a scenario mapping")
+        return data
 
+    @_reading
     def robot_names(self) -> list[str]:
         """Robots in scenario order (from the stored scenario, else from the odometry
         topics)."""
@@ -274,6 +319,7 @@ class Recording:
             return [r["name"] for r in sc.get("robots", [])]
         return [t.split("/")[1] for t in self.topics if t.endswith("/ground_truth")]
 
+    @_reading
     def lidar_topics(self) -> list[tuple[str, str, str]]:
         """(robot name, sensor frame name, topic) of every scan topic, robots in scenario order;
         lidars (per the stored scenario, else scans of more than 8 beams) first."""
@@ -297,6 +343,7 @@ class Recording:
         out.sort(key=lambda x: not x[3])  # stable: lidars first, scenario order kept
         return [(a, b, c) for a, b, c, _ in out]
 
+    @_reading
     def _beams(self, topic: str) -> int:
         t_ns, raw = self._raw[topic][0]
         return len(self._store.deserialize_cdr(raw, LASER_SCAN).ranges)

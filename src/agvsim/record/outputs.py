@@ -28,7 +28,9 @@ class TrajectoryWriter:
     ``wheel_names`` order (listed per robot in summary.json); unused columns stay empty."""
 
     def __init__(self, path: Path, sim: Simulation, every: int = 1):
-        self.path, self.sim, self.every = Path(path), sim, max(1, int(every))
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise ValueError(f"record_every: {every!r} is not allowed (an integer >= 1)")
+        self.path, self.sim, self.every = Path(path), sim, every
         self._f = self.path.open("w", encoding="utf-8", newline="")
         self._f.write(",".join(COLUMNS) + "\n")
         self._names = [r.name for r in sim.robots]

@@ -29,6 +29,7 @@ CSV_EXTENSIONS = (".csv",)
 IMAGE_EXTENSIONS = (".png", ".pgm", ".ppm", ".pbm", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff")
 ROS_EXTENSIONS = (".yaml", ".yml")  # read by agvsim.world.ros_map
 _ROS_OCCUPIED_PIXEL = 0  # walls in saved images, as ROS map_saver writes them
+MAX_CELLS = 25_000_000  # default limit on rows x cols of a map read from a file (5000 x 5000)
 
 _A_MATRIX = "a non-empty list of equal-length rows of 0/1"
 _A_PICTURE = f"lines of '{WALL_CHAR}' (wall) and '{FREE_CHAR}' (free), all the same width"
@@ -188,6 +189,27 @@ def format_text_picture(grid: OccupancyGrid) -> str:
     return "".join("".join(row) + "\n" for row in chars)
 
 
+def _check_cells(rows: int, cols: int, max_cells: int | None, source: str) -> None:
+    """MapFormatError when a ``rows x cols`` map is over ``max_cells`` (default MAX_CELLS)."""
+    limit = MAX_CELLS if max_cells is None else max_cells
+    if rows * cols > limit:
+        problem = (
+            f"{rows:,} x {cols:,} = {rows * cols:,} cells is over the limit max_grid_cells = "
+            f"{limit:,} (raise it with 'limits: {{max_grid_cells: {rows * cols}}}' in the "
+            f"scenario or '--limit max_grid_cells={rows * cols}')"
+        )
+        raise _err(source, None, problem)
+
+
+def _check_text_size(path: Path, max_cells: int | None) -> None:
+    """Refuse a text map file too large to hold a map within the cell limit (before reading)."""
+    limit = MAX_CELLS if max_cells is None else max_cells
+    size = path.stat().st_size
+    if size > 4 * limit + (1 << 20):  # a cell takes 1 (picture) or 2 (CSV) bytes; room for spaces
+        problem = f"{size:,} bytes is too large for a map of at most max_grid_cells = {limit:,}"
+        raise _err(str(path), None, problem, "raise max_grid_cells (docs/scenario.md, 'Limits')")
+
+
 def _require_file(path: str | Path) -> Path:
     p = Path(path)
     if not p.is_file():
@@ -211,22 +233,34 @@ def _read_text(path: Path) -> str:
 
 
 def load_text(
-    path: str | Path, resolution_m: float = 1.0, origin_xy_m: tuple[float, float] | None = None
+    path: str | Path,
+    resolution_m: float = 1.0,
+    origin_xy_m: tuple[float, float] | None = None,
+    max_cells: int | None = None,
 ) -> OccupancyGrid:
-    """Read a text picture file (see :func:`parse_text_picture`); cells ``resolution_m`` metres."""
+    """Read a text picture file (see :func:`parse_text_picture`); cells ``resolution_m`` metres;
+    at most ``max_cells`` cells (default :data:`MAX_CELLS`)."""
     p = _require_file(path)
-    return parse_text_picture(_read_text(p), resolution_m, origin_xy_m, source=str(p))
+    _check_text_size(p, max_cells)
+    grid = parse_text_picture(_read_text(p), resolution_m, origin_xy_m, source=str(p))
+    _check_cells(grid.rows, grid.cols, max_cells, str(p))
+    return grid
 
 
 def load_csv(
-    path: str | Path, resolution_m: float = 1.0, origin_xy_m: tuple[float, float] | None = None
+    path: str | Path,
+    resolution_m: float = 1.0,
+    origin_xy_m: tuple[float, float] | None = None,
+    max_cells: int | None = None,
 ) -> OccupancyGrid:
     """Read comma-separated 0/1 rows (1 = wall, first line = north; spaces around values ok).
 
     Blank lines before and after the matrix are ignored; a blank line inside it is an error.
-    Cells are ``resolution_m`` metres; ``origin_xy_m`` as in :func:`grid_from_matrix`.
+    Cells are ``resolution_m`` metres; ``origin_xy_m`` as in :func:`grid_from_matrix`; at most
+    ``max_cells`` cells (default :data:`MAX_CELLS`).
     """
     p = _require_file(path)
+    _check_text_size(p, max_cells)
     src = str(p)
     numbered = _content_lines(_read_text(p), src, _A_CSV)
     rows: list[list[bool]] = []
@@ -239,17 +273,21 @@ def load_csv(
             problem = f"has {len(fields)} fields but line {numbered[0][0]} has {len(rows[0])}"
             raise _err(src, f"line {n}", problem, _A_CSV)
         rows.append([f == "1" for f in fields])
+    _check_cells(len(rows), len(rows[0]), max_cells, src)
     return _make_grid(np.array(rows, dtype=bool), resolution_m, origin_xy_m, src)
 
 
 # ---------------------------------------------------------------------------------- images
-def _read_grey(path: Path, source: str) -> np.ndarray:
+def _read_grey(path: Path, source: str, max_cells: int | None = None) -> np.ndarray:
     """Image as float grey levels in [0, 255]: mean of the colour channels, alpha ignored,
-    16-bit images scaled down. Any Pillow failure becomes a MapFormatError."""
+    16-bit images scaled down. Any Pillow failure becomes a MapFormatError; an image of more
+    than ``max_cells`` pixels is refused before it is decoded."""
     from PIL import Image, UnidentifiedImageError
 
     try:
         with Image.open(path) as opened:
+            width, height = opened.size
+            _check_cells(height, width, max_cells, source)
             opened.load()
             img: Image.Image = opened
             if img.mode == "P":
@@ -288,6 +326,7 @@ def load_image(
     origin_xy_m: tuple[float, float] | None = None,
     threshold: float = 0.5,
     negate: bool = False,
+    max_cells: int | None = None,
 ) -> OccupancyGrid:
     """Read an image (PNG, PGM, BMP, JPEG, ... anything Pillow reads): one pixel = one cell.
 
@@ -300,10 +339,11 @@ def load_image(
         origin_xy_m: world (x, y) in metres of the lower-left corner; None centres the map.
         threshold: lightness in [0, 1] below which a pixel is a wall.
         negate: treat light pixels as walls.
+        max_cells: most pixels allowed (default :data:`MAX_CELLS`).
     """
     p = _require_file(path)
     threshold = _fraction(threshold, str(p), "threshold")
-    lightness = _read_grey(p, str(p)) / 255.0
+    lightness = _read_grey(p, str(p), max_cells) / 255.0
     if negate:
         lightness = 1.0 - lightness
     return _make_grid(lightness < threshold, resolution_m, origin_xy_m, str(p))
@@ -314,13 +354,15 @@ def load_map(
     path: str | Path,
     resolution_m: float | None = None,
     origin_xy_m: tuple[float, float] | None = None,
+    max_cells: int | None = None,
 ) -> OccupancyGrid:
     """Read a map, choosing the reader by file extension (case-insensitive).
 
     ``.txt``/``.map``: text picture; ``.csv``: 0/1 matrix; ``.png``/``.pgm``/``.bmp``/``.jpg``
     etc.: image (dark = wall); ``.yaml``/``.yml``: ROS map. ``resolution_m`` (metres per cell,
     default 1.0) and ``origin_xy_m`` (lower-left corner in metres, default centred) apply to
-    pictures only; a ROS map carries its own, and giving either for one is an error.
+    pictures only; a ROS map carries its own, and giving either for one is an error. A map of
+    more than ``max_cells`` cells (default :data:`MAX_CELLS`) is refused before it is read.
     """
     p = _require_file(path)
     ext = p.suffix.lower()
@@ -330,14 +372,14 @@ def load_map(
             raise _err(str(p), "resolution_m/origin_xy_m", problem, "leave both unset (None)")
         from agvsim.world.ros_map import load_ros_map  # imports this module: not at the top
 
-        return load_ros_map(p)
+        return load_ros_map(p, max_cells=max_cells)
     res = 1.0 if resolution_m is None else resolution_m
     if ext in TEXT_EXTENSIONS:
-        return load_text(p, res, origin_xy_m)
+        return load_text(p, res, origin_xy_m, max_cells)
     if ext in CSV_EXTENSIONS:
-        return load_csv(p, res, origin_xy_m)
+        return load_csv(p, res, origin_xy_m, max_cells)
     if ext in IMAGE_EXTENSIONS:
-        return load_image(p, res, origin_xy_m)
+        return load_image(p, res, origin_xy_m, max_cells=max_cells)
     allowed = " ".join(TEXT_EXTENSIONS + CSV_EXTENSIONS + IMAGE_EXTENSIONS + ROS_EXTENSIONS)
     raise _err(str(p), "extension", f"{ext or '(none)'!r} is not a known map format", allowed)
 

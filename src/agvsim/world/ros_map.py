@@ -23,7 +23,6 @@ from agvsim.world.loaders import (
     _is_real,
     _make_grid,
     _read_grey,
-    _read_text,
     _require_file,
     _save_grey,
 )
@@ -54,21 +53,21 @@ def _ros_number(value: Any, source: str, key: str, allowed: str) -> float:
 
 
 def _read_ros_yaml(p: Path) -> dict[str, Any]:
-    import yaml
+    from agvsim.safe_yaml import YamlInputError, YamlLimits, load_yaml_file
 
-    try:
-        doc = yaml.safe_load(_read_text(p))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark is not None else None
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise _err(str(p), where, f"not valid YAML ({problem})", _A_ROS) from exc
+    try:  # a map_server YAML is a handful of keys: tight limits against alias bombs
+        doc = load_yaml_file(p, YamlLimits(max_bytes=1 << 20, max_nodes=10_000, max_depth=16))
+    except YamlInputError as exc:
+        where = f"line {exc.line}" if exc.line is not None else None
+        raise _err(str(p), where, exc.problem, _A_ROS) from None
     if not isinstance(doc, dict):
         raise _err(str(p), None, f"top level is a {type(doc).__name__}, not a mapping", _A_ROS)
     return doc
 
 
-def load_ros_map(yaml_path: str | Path, unknown_is_occupied: bool = True) -> OccupancyGrid:
+def load_ros_map(
+    yaml_path: str | Path, unknown_is_occupied: bool = True, max_cells: int | None = None
+) -> OccupancyGrid:
     """Read a ROS ``map_server`` map (YAML + image); resolution and origin come from the YAML.
 
     Keys: ``image`` (path, relative to the YAML file), ``resolution`` (m/pixel), ``origin``
@@ -80,7 +79,8 @@ def load_ros_map(yaml_path: str | Path, unknown_is_occupied: bool = True) -> Occ
     v is the mean of the colour channels; ``p > occupied_thresh`` is occupied,
     ``p < free_thresh`` free, anything else unknown (scale's in-between values included).
     Raw mode reads v (after negate) as percent occupancy; ``v > 100`` is unknown.
-    Unknown cells are walls when ``unknown_is_occupied`` (default), free otherwise.
+    Unknown cells are walls when ``unknown_is_occupied`` (default), free otherwise. An image
+    of more than ``max_cells`` pixels (default ``loaders.MAX_CELLS``) is refused unread.
     """
     p = _require_file(yaml_path)
     src, doc = str(p), _read_ros_yaml(p)
@@ -113,7 +113,7 @@ def load_ros_map(yaml_path: str | Path, unknown_is_occupied: bool = True) -> Occ
     if not image_path.is_file():
         problem = f"image file {str(image_path)!r} not found"
         raise _err(src, "key 'image'", problem, "an existing image, relative to the YAML file")
-    grey = _read_grey(image_path, f"{image_path} (image of {src})")
+    grey = _read_grey(image_path, f"{image_path} (image of {src})", max_cells)
     if mode == "raw":
         value = 255.0 - grey if negate else grey
         known, p_occ = value <= 100.0, value / 100.0
