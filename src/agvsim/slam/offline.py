@@ -81,6 +81,7 @@ class OfflineResult:
     n_loop_closures: int
     log_duration_s: float  # last minus first scan time stamp
     processing_s: float  # SLAM and map writing, log reading included
+    warnings: tuple[str, ...] = ()  # e.g. a log cut off early (mapped up to the cut)
 
     @property
     def realtime_factor(self) -> float:
@@ -160,4 +161,5 @@ def run_offline(
         len(slam.loop_edges),
         float(stamps[-1] - stamps[0]) if n else 0.0,
         time.perf_counter() - t0,
+        tuple(log.warnings()) if isinstance(log, CarmenLog) else (),
     )
