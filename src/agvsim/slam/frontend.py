@@ -120,15 +120,22 @@ class Submap:
     kernel: F32
     nodes: list[int] = field(default_factory=list)
     finished: bool = False
-    # a finished submap keeps only its likelihood field, as 16-bit fixed point (value * 65535,
-    # error < 1e-5): memory follows the mapped area, 2 bytes a cell, not 8 (log-odds + field)
-    packed: NDArray[np.uint16] | None = None
+    # a finished submap keeps only its occupied cells (row, column; int16), a few kB: its
+    # likelihood field is a pure function of them and is rebuilt when loop closing needs it
+    # (:meth:`field`; the loop detector caches what it rebuilt). Memory then follows the
+    # length of the walls mapped, not the log's duration or the sensor's range.
+    occupied_cells: NDArray[np.int16] | None = None
+    grid_shape: tuple[int, int] = (0, 0)
+    field_sigma_m: float = 0.0
+    field_resolution_m: float = 0.0
 
     def field(self) -> F32:
-        """The likelihood field for matching (decoded if the submap is finished)."""
-        if self.packed is None:
+        """The likelihood field for matching (rebuilt from the occupied cells once finished)."""
+        if self.occupied_cells is None:
             return self.likelihood
-        return (self.packed * np.float32(1.0 / 65535.0)).astype(np.float32)
+        occ = np.zeros(self.grid_shape, dtype=bool)
+        occ[self.occupied_cells[:, 0], self.occupied_cells[:, 1]] = True
+        return likelihood_field(occ, self.field_sigma_m, self.field_resolution_m)
 
     def insert(
         self, cfg: TrackingConfig, sensor_xy: F64, ends: F64, hits: NDArray[np.bool_], node: int
@@ -155,8 +162,7 @@ class Submap:
         self.nodes.append(node)
 
     def finish(self, cfg: TrackingConfig) -> None:
-        """Crop to the mapped cells, recompute the field exactly from the occupied cells and
-        keep only that, packed (:meth:`field`)."""
+        """Crop to the mapped cells and keep only the occupied ones (:meth:`field`)."""
         known = np.nonzero(self.logodds != 0)
         if known[0].size:
             pad = self.kernel.shape[0]
@@ -165,8 +171,12 @@ class Submap:
             self.logodds = np.ascontiguousarray(self.logodds[y0:y1, x0:x1])
             self.ox += x0 * cfg.resolution_m
             self.oy += y0 * cfg.resolution_m
-        lf = likelihood_field(self.logodds > 0, cfg.sigma_m, cfg.resolution_m)
-        self.packed = np.round(lf * 65535.0).astype(np.uint16)
+        occ = self.logodds > 0
+        if max(occ.shape) > np.iinfo(np.int16).max:
+            raise ValueError(f"submap {self.index}: {occ.shape} cells exceed int16 indices")
+        self.occupied_cells = np.argwhere(occ).astype(np.int16)
+        self.grid_shape = (int(occ.shape[0]), int(occ.shape[1]))
+        self.field_sigma_m, self.field_resolution_m = cfg.sigma_m, cfg.resolution_m
         empty = np.zeros((0, 0), np.float32)
         self.likelihood, self.logodds = empty, empty  # the log-odds are not needed any more
         self.finished = True
