@@ -439,6 +439,8 @@ def _slam_log(
         _fail("error", e)
         raise typer.Exit(2) from None
     r = result
+    for warning in r.warnings:
+        _fail("warning", warning, style="yellow")
     out.print(
         f"{r.n_scans} scans, {r.n_keyframes} keyframes, {r.n_submaps} submaps, "
         f"{r.n_loop_closures} loop closures; {r.log_duration_s:.0f} s of data in "

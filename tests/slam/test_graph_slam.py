@@ -252,3 +252,30 @@ def test_good_odometry_is_kept_from_the_first_scan() -> None:
 
     fused, alone = track(True), track(False)
     assert fused < 0.02 and fused < 0.5 * alone  # measured: 0.013 vs 0.031 m
+
+
+def test_finished_submap_keeps_only_its_occupied_cells() -> None:
+    """Finishing frees the log-odds and the live field; the field rebuilt from the occupied
+    cells is exactly the likelihood field of the cropped occupancy (bit for bit)."""
+    from agvsim.slam.mapping import likelihood_field
+
+    path = np.array([[1.5 + 0.2 * k, 1.5, 0.0] for k in range(20)])
+    cfg = TrackingConfig(submap_keyframes=len(path))
+    tracker = Tracker(cfg)
+    slam = GraphSlam(30.0)
+    for node, pose in enumerate(path):
+        _, ends, hits = slam.scan_points(cast(pose), ANGLES)
+        world = compose(pose, np.column_stack([ends, np.zeros(len(ends))]))[:, :2]
+        tracker.insert(node, pose, pose[:2], world, hits)
+    live = tracker.active[0]
+    known = np.nonzero(live.logodds != 0)
+    pad = live.kernel.shape[0]
+    y0, x0 = max(known[0].min() - pad, 0), max(known[1].min() - pad, 0)
+    crop = live.logodds[y0 : known[0].max() + pad + 1, x0 : known[1].max() + pad + 1] > 0
+    expected = likelihood_field(crop, cfg.sigma_m, cfg.resolution_m)
+    (sub,) = tracker.finish_all()
+    assert sub.logodds.size == 0 and sub.likelihood.size == 0
+    assert sub.occupied_cells is not None and sub.occupied_cells.dtype == np.int16
+    assert sub.occupied_cells.nbytes < expected.nbytes / 20  # walls, not area (1.7 %)
+    np.testing.assert_array_equal(sub.field(), expected)
+    assert sub.ox == pytest.approx(live.ox) and sub.field().shape == expected.shape

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import gzip
 import math
-from collections.abc import Iterator
+import zlib
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -35,6 +36,7 @@ from numpy.typing import NDArray
 __all__ = [
     "CarmenFormatError",
     "CarmenLog",
+    "CarmenTruncated",
     "OdomRecord",
     "ScanRecord",
     "carmen_angles",
@@ -92,6 +94,34 @@ def _open(path: Path) -> IO[str]:
     return open(path, encoding="ascii", errors="replace")
 
 
+class CarmenTruncated(Exception):
+    """The compressed log ends before its end-of-stream marker (a copy cut short, a recorder
+    killed): the lines before the cut were read. Raised by :func:`_lines` only."""
+
+    def __init__(self, path: str, line_no: int) -> None:
+        self.path, self.line_no = path, line_no
+        super().__init__(f"{path}: the log is cut off after line {line_no}")
+
+
+def _lines(path: Path) -> Iterator[tuple[int, str]]:
+    """``(line number, line)`` of a log; a damaged gzip stream raises
+    :class:`CarmenFormatError` naming the file and the line it broke in, a truncated one
+    :class:`CarmenTruncated` after the last complete line."""
+    line_no = 0
+    try:
+        with _open(path) as fh:
+            for line in fh:  # a line cut by the end of the data is never returned
+                line_no += 1
+                yield line_no, line
+    except EOFError:
+        raise CarmenTruncated(str(path), line_no) from None
+    except (gzip.BadGzipFile, zlib.error, OSError) as exc:
+        where = "at the start" if line_no == 0 else f"after line {line_no}"
+        raise CarmenFormatError(
+            str(path), line_no + 1, "gzip", f"corrupt compressed data {where} ({exc})"
+        ) from None
+
+
 def _relative(robot: NDArray[np.float64], laser: NDArray[np.float64]) -> NDArray[np.float64]:
     """``robot^-1 * laser`` for single poses."""
     c, s = math.cos(robot[2]), math.sin(robot[2])
@@ -146,10 +176,11 @@ def _is_float(text: str) -> bool:
 
 def _survey(path: Path) -> tuple[int, float]:
     """Number of laser messages and the largest FLASER reading of the log (the sensor's
-    no-return value); lines it cannot read are left for the main pass to report."""
+    no-return value); lines it cannot read are left for the main pass to report, and so is
+    a truncated end."""
     count, best = 0, 0.0
-    with _open(path) as f:
-        for line in f:
+    try:
+        for line in _survey_lines(path):
             if line.startswith("FLASER"):
                 count += 1
                 parts = line.split()
@@ -160,7 +191,14 @@ def _survey(path: Path) -> tuple[int, float]:
                     continue
             elif line.startswith("ROBOTLASER1"):
                 count += 1
+    except CarmenTruncated:
+        pass
     return count, best
+
+
+def _survey_lines(path: Path) -> Iterable[str]:
+    for _, line in _lines(path):
+        yield line
 
 
 def _no_return(ranges: NDArray[np.float64], max_range_m: float) -> NDArray[np.float64]:
@@ -218,46 +256,60 @@ def read_carmen(
     """Yield the scans (and, with ``with_odom``, the ``ODOM`` messages) of a CARMEN log in order.
 
     ``max_range_m`` is the FLASER no-return value; by default the largest FLASER reading in the
-    log. Raises :class:`CarmenFormatError` on a malformed line, :class:`FileNotFoundError` when
-    the file is missing.
+    log. Raises :class:`CarmenFormatError` on a malformed line or damaged compressed data,
+    :class:`CarmenTruncated` after the last complete line of a cut-off ``.gz`` log, and
+    :class:`FileNotFoundError` when the file is missing.
     """
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"CARMEN log not found: {p}")
     flaser_max = max_range_m
-    with _open(p) as fh:
-        for line_no, line in enumerate(fh, start=1):
-            parts = line.split()
-            if not parts or parts[0].startswith("#"):
-                continue
-            kind = parts[0]
-            f = _Line(parts, str(p), line_no)
-            if kind == "FLASER":
-                if flaser_max is None:
-                    flaser_max = _survey(p)[1]
-                yield _parse_flaser(f, flaser_max)
-            elif kind == "ROBOTLASER1":
-                yield _parse_robotlaser(f)
-            elif kind == "ODOM":
-                odom = _parse_odom(f)
-                if with_odom:
-                    yield odom
+    for line_no, line in _lines(p):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        kind = parts[0]
+        f = _Line(parts, str(p), line_no)
+        if kind == "FLASER":
+            if flaser_max is None:
+                flaser_max = _survey(p)[1]
+            yield _parse_flaser(f, flaser_max)
+        elif kind == "ROBOTLASER1":
+            yield _parse_robotlaser(f)
+        elif kind == "ODOM":
+            odom = _parse_odom(f)
+            if with_odom:
+                yield odom
 
 
 class CarmenLog:
     """A CARMEN log as a sized iterable of :class:`ScanRecord` (one survey pass at open: the
-    number of scans and the FLASER no-return value)."""
+    number of scans and the FLASER no-return value). A ``.gz`` log cut off before its end is
+    read up to the cut; ``truncated_after_line`` then says where (None otherwise)."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(f"CARMEN log not found: {self.path}")
         self._count, self.flaser_max_range_m = _survey(self.path)
+        self.truncated_after_line: int | None = None
 
     def __len__(self) -> int:
         return self._count
 
     def __iter__(self) -> Iterator[ScanRecord]:
-        for rec in read_carmen(self.path, self.flaser_max_range_m or None):
-            if isinstance(rec, ScanRecord):
-                yield rec
+        try:
+            for rec in read_carmen(self.path, self.flaser_max_range_m or None):
+                if isinstance(rec, ScanRecord):
+                    yield rec
+        except CarmenTruncated as cut:
+            self.truncated_after_line = cut.line_no
+
+    def warnings(self) -> list[str]:
+        """What the user should know about the log once it was read."""
+        if self.truncated_after_line is None:
+            return []
+        return [
+            f"{self.path}: the log is cut off after line {self.truncated_after_line} "
+            "(compressed data ends early); mapped the scans up to the cut"
+        ]

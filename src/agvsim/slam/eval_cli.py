@@ -18,7 +18,7 @@ from agvsim.slam.evaluate import (
     load_trajectory,
 )
 from agvsim.slam.g2o import G2OFormatError, load_g2o, save_g2o
-from agvsim.slam.posegraph import PoseGraph, RobustKernel, optimize
+from agvsim.slam.posegraph import Initialisation, PoseGraph, RobustKernel, optimize
 
 __all__ = ["SlamCommandError", "eval_command", "optimize_g2o_command"]
 
@@ -51,9 +51,11 @@ def optimize_g2o_command(
     robust: RobustKernel | str = RobustKernel.NONE,
     max_iterations: int = 100,
     robust_scale: float = 1.0,
+    initialisation: Initialisation | str = Initialisation.AUTO,
 ) -> str:
     """Load a 2-D g2o graph, optimise it (node 0 fixed) and report chi2, iterations and time;
-    write the optimised graph to ``out`` when given."""
+    write the optimised graph to ``out`` when given. By default the start is the better of
+    the stored guess and the guess-free chordal start (:class:`~.posegraph.Initialisation`)."""
     _need_file(path, "g2o")
     try:
         kernel = RobustKernel(robust)
@@ -72,7 +74,11 @@ def optimize_g2o_command(
         raise SlamCommandError(f"{path}: the graph has no nodes")
     t0 = time.perf_counter()
     result = optimize(
-        graph, robust=kernel, robust_scale=robust_scale, max_iterations=max_iterations
+        graph,
+        robust=kernel,
+        robust_scale=robust_scale,
+        max_iterations=max_iterations,
+        initialisation=initialisation,
     )
     seconds = time.perf_counter() - t0
     lines = [

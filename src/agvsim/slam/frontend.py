@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.mapping import gaussian_kernel, likelihood_field, stamp_points, update_log_odds
-from agvsim.slam.se2 import between, compose
+from agvsim.slam.odometry_check import DoubtConfig, OdometryCheck
+from agvsim.slam.se2 import between
 
 __all__ = ["MotionFilter", "Submap", "Tracker", "TrackingConfig"]
 
@@ -57,6 +58,16 @@ class TrackingConfig:
     l_hit: float = 0.85
     l_miss: float = -0.4
     l_clamp: float = 4.0
+    doubt: DoubtConfig = field(default_factory=DoubtConfig)  # odometry checked by matching
+    # floors of odometry's per-scan noise from a wheel odometry's physics (std): translation
+    # per metre driven (wheel radius, slip), heading per radian turned (track width) and per
+    # metre driven (wheel radius difference); the learnt noise never falls below them
+    odom_floor_m_per_m: float = 0.01
+    odom_floor_rad_per_rad: float = 0.01
+    odom_floor_rad_per_m: float = math.radians(0.25)
+    lost_score: float = 0.35  # below it after the wide search for lost_scans scans: relocalise
+    lost_scans: int = 3
+    relocalise_window_m: float = 2.0  # relocalisation search: +- this, all headings
 
 
 @njit(cache=True)
@@ -109,6 +120,22 @@ class Submap:
     kernel: F32
     nodes: list[int] = field(default_factory=list)
     finished: bool = False
+    # a finished submap keeps only its occupied cells (row, column; int16), a few kB: its
+    # likelihood field is a pure function of them and is rebuilt when loop closing needs it
+    # (:meth:`field`; the loop detector caches what it rebuilt). Memory then follows the
+    # length of the walls mapped, not the log's duration or the sensor's range.
+    occupied_cells: NDArray[np.int16] | None = None
+    grid_shape: tuple[int, int] = (0, 0)
+    field_sigma_m: float = 0.0
+    field_resolution_m: float = 0.0
+
+    def field(self) -> F32:
+        """The likelihood field for matching (rebuilt from the occupied cells once finished)."""
+        if self.occupied_cells is None:
+            return self.likelihood
+        occ = np.zeros(self.grid_shape, dtype=bool)
+        occ[self.occupied_cells[:, 0], self.occupied_cells[:, 1]] = True
+        return likelihood_field(occ, self.field_sigma_m, self.field_resolution_m)
 
     def insert(
         self, cfg: TrackingConfig, sensor_xy: F64, ends: F64, hits: NDArray[np.bool_], node: int
@@ -135,7 +162,7 @@ class Submap:
         self.nodes.append(node)
 
     def finish(self, cfg: TrackingConfig) -> None:
-        """Crop to the mapped cells and recompute the field exactly from the occupied cells."""
+        """Crop to the mapped cells and keep only the occupied ones (:meth:`field`)."""
         known = np.nonzero(self.logodds != 0)
         if known[0].size:
             pad = self.kernel.shape[0]
@@ -144,7 +171,14 @@ class Submap:
             self.logodds = np.ascontiguousarray(self.logodds[y0:y1, x0:x1])
             self.ox += x0 * cfg.resolution_m
             self.oy += y0 * cfg.resolution_m
-        self.likelihood = likelihood_field(self.logodds > 0, cfg.sigma_m, cfg.resolution_m)
+        occ = self.logodds > 0
+        if max(occ.shape) > np.iinfo(np.int16).max:
+            raise ValueError(f"submap {self.index}: {occ.shape} cells exceed int16 indices")
+        self.occupied_cells = np.argwhere(occ).astype(np.int16)
+        self.grid_shape = (int(occ.shape[0]), int(occ.shape[1]))
+        self.field_sigma_m, self.field_resolution_m = cfg.sigma_m, cfg.resolution_m
+        empty = np.zeros((0, 0), np.float32)
+        self.likelihood, self.logodds = empty, empty  # the log-odds are not needed any more
         self.finished = True
 
 
@@ -200,8 +234,11 @@ class OdometryFusion:
     Until it is :meth:`ready`, the pose is odometry's alone (and :class:`~.graph_slam.GraphSlam`
     processes those first scans again with the learnt noises, :meth:`preset`)."""
 
-    def __init__(self, window: int, lag: int) -> None:
+    def __init__(
+        self, window: int, lag: int, floors: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ) -> None:
         self.window, self.lag = window, lag
+        self.floors = floors  # std: m per m, rad per rad, rad per m (TrackingConfig.odom_floor_*)
         self._preset = False
         self.matches: list[F64] = []
         self.odoms: list[F64] = []
@@ -211,8 +248,25 @@ class OdometryFusion:
         self._raw: F64 | None = None
         self._last_odom: F64 | None = None
 
-    def fuse(self, guess: F64, match: F64, hessian: F64) -> F64:
-        """The fused pose; records ``match`` (call :meth:`add` with the odometry after)."""
+    def floor_variance(self, step: F64) -> tuple[float, float]:
+        """Odometry's least per-scan variance (translation, heading) for an odometry
+        increment ``step`` (3,): its physics, not what the run showed (:class:`TrackingConfig`
+        ``odom_floor_*``). Regular motion between sparse scans can make the learnt spread
+        vanish; scans must still correct odometry in proportion to how far it drove."""
+        dist, turn = math.hypot(step[0], step[1]), abs(_wrap(step[2]))
+        f_m, f_rr, f_rm = self.floors
+        return (f_m * dist) ** 2, (f_rr * turn + f_rm * dist) ** 2
+
+    def match_variance(self) -> tuple[float, float] | None:
+        """The matches' per-scan variance (translation, heading), None until learnt."""
+        if not (self._preset or self.ready()):
+            return None
+        s_o, s_m, k_rot, s_or = self._k
+        return s_m, s_or * (1.0 - k_rot) / max(k_rot, 1e-12)
+
+    def fuse(self, guess: F64, match: F64, hessian: F64, step: F64 | None = None) -> F64:
+        """The fused pose; records ``match`` (call :meth:`add` with the odometry after).
+        ``step`` is the odometry increment behind ``guess`` (for the noise floors)."""
         self._raw = np.asarray(match, np.float64).copy()
         w, v = np.linalg.eigh(hessian[:2, :2])
         w = np.maximum(w, 0.0)
@@ -223,7 +277,14 @@ class OdometryFusion:
             return guess.copy()
         if self.ready() and self._count % 10 == 0:
             self._k = self.estimate()
-        s_o, s_m, k_rot, _ = self._k
+        s_o, s_m, k_rot, s_or = self._k
+        if step is not None:
+            f_t, f_r = self.floor_variance(step)
+            if f_t > s_o:
+                s_o = f_t
+            if f_r > s_or:
+                s_mr = s_or * (1.0 - k_rot) / max(k_rot, 1e-12)
+                k_rot = f_r / (f_r + s_mr)
         ref = float(np.median(self.sharp))
         d = v.T @ (match[:2] - guess[:2])
         d *= s_o / (s_o + s_m * ref / np.maximum(w, 1e-9 * ref + 1e-12))
@@ -308,24 +369,45 @@ class Tracker:
         self.odom: F64 | None = None
         self.active: list[Submap] = []
         self.submaps: list[Submap] = []
+        floors = (cfg.odom_floor_m_per_m, cfg.odom_floor_rad_per_rad, cfg.odom_floor_rad_per_m)
         self.fusion = (
-            OdometryFusion(cfg.fusion_window, cfg.fusion_lag) if cfg.fuse_odometry else None
+            OdometryFusion(cfg.fusion_window, cfg.fusion_lag, floors) if cfg.fuse_odometry else None
         )
+        self.check = OdometryCheck(cfg.doubt)
+        self.doubted = False  # the last scan's match refuted odometry
+        self.odom_suspect = False  # ... or its scan-to-scan odometry increment was wrong
+        self.n_relocalised = 0
+        self._lost = 0
 
-    def predict(self, odom_pose: F64) -> F64:
-        """``x_pred = x_prev * (o_prev^-1 * o_now)``; the first scan starts at its odometry."""
+    def predict(self, odom_pose: F64) -> list[F64]:
+        """Predictions of the scan's pose, scan to scan ``x_prev * (o_prev^-1 * o_now)`` first,
+        then from the last scan odometry agreed with (:class:`~.odometry_check.OdometryCheck`);
+        the first scan starts at its odometry."""
         if self.pose is None or self.odom is None:
-            return np.asarray(odom_pose, np.float64).copy()
-        return compose(self.pose, between(self.odom, odom_pose))
+            return [np.asarray(odom_pose, np.float64).copy()]
+        return self.check.candidates(self.pose, self.odom, odom_pose)
 
-    def match(self, points: F64, guess: F64, ang_step: float) -> tuple[F64, float]:
-        """Correlative search then Gauss-Newton against the older active submap. A poor match
-        (score under ``retry_score``: odometry glitch, fast turn) is searched again in the wide
-        window. ``ang_step`` (rad) is the angular search step."""
+    def match(self, points: F64, guesses: list[F64], ang_step: float) -> tuple[F64, float]:
+        """Correlative search then Gauss-Newton against the older active submap, around the
+        prediction the scan fits best, in windows that grow with odometry's uncertainty. A poor
+        match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
+        wide window; one lost for ``lost_scans`` scans is relocalised in the submap. A match
+        that refutes odometry is kept as it is; otherwise it is fused with the prediction.
+        ``ang_step`` (rad) is the angular search step."""
+        guess = guesses[0]
+        self.doubted = self.odom_suspect = False
         if not self.active:
             return guess, 0.0
         s, cfg = self.active[0], self.cfg
         res = cfg.resolution_m
+        if len(guesses) > 1:
+            fits = [sm.score_pose(s.likelihood, s.ox, s.oy, res, points, g) for g in guesses]
+            best = int(np.argmax(fits))
+            guess = guesses[best]
+            # the scan-to-scan increment was wrong (a stall, or the jump after one)
+            self.odom_suspect = best != 0
+        odom_var = self.odometry_variance()
+        win_m, win_rad = self.check.windows(odom_var, cfg.window_m, cfg.window_rad)
         pose, score = sm.correlative_search(
             s.likelihood,
             s.ox,
@@ -333,8 +415,8 @@ class Tracker:
             res,
             points,
             guess,
-            cfg.window_m,
-            cfg.window_rad,
+            win_m,
+            win_rad,
             ang_step,
             cfg.prior_lin_weight,
             cfg.prior_ang_weight,
@@ -347,8 +429,8 @@ class Tracker:
                 res,
                 points,
                 guess,
-                cfg.wide_window_m,
-                cfg.wide_window_rad,
+                max(cfg.wide_window_m, win_m),
+                max(cfg.wide_window_rad, win_rad),
                 2.0 * ang_step,
                 0.0,
                 0.0,
@@ -367,16 +449,49 @@ class Tracker:
                     0.0,
                     0.0,
                 )
+        self._lost = self._lost + 1 if score < cfg.lost_score else 0
+        if self._lost >= cfg.lost_scans:
+            pose, score = self._relocalise(s, points, guess, ang_step, pose, score)
         refined, score2, _ = sm.gauss_newton(
             s.likelihood, s.ox, s.oy, res, points, pose, cfg.gn_iterations, cfg.gn_prior_weight
         )
         score = sm.score_pose(s.likelihood, s.ox, s.oy, res, points, pose)
         if score2 >= score and np.all(np.abs(refined[:2] - pose[:2]) < res):
             pose, score = refined, score2
-        if self.fusion is not None:
+        at_guess = sm.score_pose(s.likelihood, s.ox, s.oy, res, points, guess)
+        match_var = None if self.fusion is None else self.fusion.match_variance()
+        self.doubted = self.check.disagrees(guess, pose, score, at_guess, odom_var, match_var)
+        self.odom_suspect |= self.doubted
+        if self.fusion is not None and not self.doubted:
+            step = between(self.pose, guess) if self.pose is not None else None
             pose = self.fusion.fuse(
-                guess, pose, sm.match_hessian(s.likelihood, s.ox, s.oy, res, points, pose)
+                guess, pose, sm.match_hessian(s.likelihood, s.ox, s.oy, res, points, pose), step
             )
+        return pose, score
+
+    def _relocalise(
+        self, s: Submap, points: F64, guess: F64, ang_step: float, pose: F64, score: float
+    ) -> tuple[F64, float]:
+        """Tracking lost: branch-and-bound over ``+-relocalise_window_m`` and every heading in
+        the submap; the result replaces the match when it scores at least ``retry_score``."""
+        cfg = self.cfg
+        pyr = sm.max_pyramid(s.likelihood, 5)
+        found, found_score = sm.branch_and_bound(
+            pyr,
+            s.ox,
+            s.oy,
+            cfg.resolution_m,
+            points,
+            guess,
+            cfg.relocalise_window_m,
+            math.pi,
+            2.0 * ang_step,
+            max(cfg.retry_score, score),
+        )
+        if found_score >= cfg.retry_score and found_score > score:
+            self.n_relocalised += 1
+            self._lost = 0
+            return found, found_score
         return pose, score
 
     def odometry_variance(self) -> tuple[float, float] | None:
@@ -388,6 +503,7 @@ class Tracker:
 
     def accept(self, pose: F64, odom_pose: F64) -> None:
         self.pose, self.odom = pose, np.asarray(odom_pose, np.float64).copy()
+        self.check.accept(pose, self.odom, self.doubted)
         if self.fusion is not None:
             self.fusion.add(self.odom)
 

@@ -9,7 +9,8 @@ Lines (one record each; blank lines and ``#`` comments are skipped)::
 
 Vertex ids are renumbered 0..N-1 in increasing id order (files whose ids are already 0..N-1,
 the usual case, keep them). A file without vertices (``manhattan.g2o``) gets ``N = max id + 1``
-nodes initialised from the odometry chain (:mod:`.posegraph_init`). A malformed line raises
+nodes initialised from the odometry chain (:mod:`.posegraph_init`). A malformed line, bytes
+that are not UTF-8 text, or an information matrix that is not positive definite raise
 :class:`G2OFormatError` naming the file, the line number, the line and what was expected.
 """
 
@@ -35,7 +36,7 @@ class G2OFormatError(ValueError):
     def __init__(self, path: Path | str, line_no: int, line: str, expected: str) -> None:
         self.path, self.line_no, self.line, self.expected = Path(path), line_no, line, expected
         text = line if len(line) <= 200 else line[:200] + "..."
-        super().__init__(f"{path}:{line_no}: {expected}; got {text!r}")
+        super().__init__(f"{path}:{line_no}: {expected}" + (f"; got {text!r}" if text else ""))
 
 
 def _numbers(fields: list[str], n_int: int, n_float: int) -> tuple[list[int], list[float]] | None:
@@ -61,8 +62,19 @@ def load_g2o(path: Path | str) -> PoseGraph:
     edge_ids: list[list[int]] = []
     edge_vals: list[list[float]] = []
     edge_lines: list[int] = []
-    with path.open("r", encoding="utf-8") as f:
-        for line_no, raw in enumerate(f, start=1):
+    with path.open("rb") as f:
+        for line_no, raw_bytes in enumerate(f, start=1):
+            try:
+                raw = raw_bytes.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                bad = raw_bytes[exc.start : exc.start + 1]
+                raise G2OFormatError(
+                    path,
+                    line_no,
+                    "",
+                    f"expected a text file; byte {bad!r} at column {exc.start + 1} is not UTF-8 "
+                    "(a binary file?)",
+                ) from None
             line = raw.strip()
             if not line or line.startswith("#"):
                 continue
@@ -142,11 +154,32 @@ def load_g2o(path: Path | str) -> PoseGraph:
     iu = np.triu_indices(3)
     info[:, iu[0], iu[1]] = vals[:, 3:]
     info[:, iu[1], iu[0]] = vals[:, 3:]
+    _check_information(path, info, edge_lines)
     return PoseGraph.from_arrays(poses, ij[:, 0], ij[:, 1], vals[:, :3], info)
 
 
+def _check_information(path: Path, info: np.ndarray, edge_lines: list[int]) -> None:
+    """Every information matrix must be positive definite: a zero (or indefinite) one makes
+    its edge weightless (or rewards error), and a graph of such edges "converges" at any
+    poses. Raises :class:`G2OFormatError` naming the first offending line."""
+    if info.shape[0] == 0:
+        return
+    eig = np.linalg.eigvalsh(info)  # ascending, (E, 3)
+    scale = np.maximum(np.abs(eig).max(axis=1), np.finfo(float).tiny)
+    bad = eig[:, 0] <= 1e-12 * scale
+    if np.any(bad):
+        e = int(np.argmax(bad))
+        raise G2OFormatError(
+            path,
+            edge_lines[e],
+            _line_text(path, edge_lines[e]),
+            "expected a positive-definite information matrix (I11 I12 I13 I22 I23 I33); "
+            f"its eigenvalues are {', '.join(f'{v:.6g}' for v in eig[e])}",
+        )
+
+
 def _line_text(path: Path, line_no: int) -> str:
-    with path.open("r", encoding="utf-8") as f:
+    with path.open("r", encoding="utf-8", errors="replace") as f:
         for k, raw in enumerate(f, start=1):
             if k == line_no:
                 return raw.strip()

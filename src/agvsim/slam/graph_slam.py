@@ -130,6 +130,7 @@ class GraphSlam:
         self._info_local = _information(cfg.sigma_local_m, cfg.sigma_local_rad)
         self._scan_at_keyframe = 0
         self._odom = np.zeros(3)  # odometry pose of the scan being processed
+        self._odom_doubted = False  # a scan since the last keyframe refuted odometry
 
     # ------------------------------------------------------------------ the algorithm
     def update(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
@@ -163,9 +164,10 @@ class GraphSlam:
     def _step(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
         self._odom = np.asarray(odom_pose, np.float64)
         points, ends, hits = self.scan_points(ranges, angles)
-        guess = self.tracker.predict(odom_pose)
-        pose, _ = self.tracker.match(points, guess, self.angular_step(points))
+        guesses = self.tracker.predict(odom_pose)
+        pose, _ = self.tracker.match(points, guesses, self.angular_step(points))
         self.tracker.accept(pose, odom_pose)
+        self._odom_doubted |= self.tracker.odom_suspect
         if self.motion.is_keyframe(pose, timestamp):
             node = self.add_keyframe(pose, points, ends, hits)
             for closure in self.find_loop_closures(node):
@@ -224,7 +226,9 @@ class GraphSlam:
                 self.node_var[node - 1], var, between(prev.local, pose), self._info_local
             )
             noise = self.tracker.odometry_variance()
-            if self.cfg.odometry_edges and noise is not None:
+            # no odometry edge across a stretch where scan matching refuted odometry (a
+            # freeze, a jump, a slip): it would pull against the local-SLAM edge
+            if self.cfg.odometry_edges and noise is not None and not self._odom_doubted:
                 # odometry's error is a random walk: the variance grows with the scans between
                 n = max(len(self.scan_times) - self._scan_at_keyframe, 1)
                 v_t = n * max(noise[0], self.cfg.odometry_floor_m**2)
@@ -232,6 +236,7 @@ class GraphSlam:
                 info = np.diag([1.0 / v_t, 1.0 / v_t, 1.0 / v_r])
                 self.graph.add_edge(self.node_var[node - 1], var, between(prev.odom, kf.odom), info)
         self._scan_at_keyframe = len(self.scan_times)
+        self._odom_doubted = False
         n_before = len(self.tracker.submaps)
         sensor_xy = compose(pose, self.laser_offset)[:2]
         self.tracker.insert(node, pose, sensor_xy, compose(pose, _xy0(ends))[:, :2], hits)

@@ -61,6 +61,7 @@ class LoopConfig:
     pyramid_levels: int = 6
     gn_iterations: int = 15
     jump_drift_factor: float = 2.0  # a match may move a node agree_m + this x drift bound
+    pyramid_cache_mib: float = 256.0  # submap pyramids kept for matching (LRU)
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,7 @@ class LoopDetector:
         self.cfg = cfg
         self.res = resolution_m
         self._pyramids: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._cached_bytes = 0
         self._pending: list[LoopClosure] = []
 
     def candidates(
@@ -116,12 +118,18 @@ class LoopDetector:
         return out
 
     def _pyramid(self, s: Submap) -> np.ndarray:
+        """The submap's max pyramid (level 0: its likelihood field), from a cache of at most
+        ``pyramid_cache_mib`` (least recently used first out): memory bounded by the map, not
+        by the log."""
         pyr = self._pyramids.get(s.index)
         if pyr is None:
-            pyr = sm.max_pyramid(s.likelihood, self.cfg.pyramid_levels)
+            pyr = sm.max_pyramid(s.field(), self.cfg.pyramid_levels)
             self._pyramids[s.index] = pyr
-            if len(self._pyramids) > 48:
-                self._pyramids.popitem(last=False)
+            self._cached_bytes += pyr.nbytes
+            budget = self.cfg.pyramid_cache_mib * 2**20
+            while self._cached_bytes > budget and len(self._pyramids) > 1:
+                _, old = self._pyramids.popitem(last=False)
+                self._cached_bytes -= old.nbytes
         else:
             self._pyramids.move_to_end(s.index)
         return pyr
@@ -143,8 +151,10 @@ class LoopDetector:
         win_m = cfg.window_m + drift_m
         win_rad = cfg.window_rad + drift_m * cfg.drift_rad_per_m
         guess = compose(s.origin, between(g_submap, g_node))
+        pyramid = self._pyramid(s)
+        field = pyramid[0]
         pose, score = sm.branch_and_bound(
-            self._pyramid(s),
+            pyramid,
             s.ox,
             s.oy,
             self.res,
@@ -158,9 +168,9 @@ class LoopDetector:
         if score < cfg.min_score:
             return None
         refined, score2, hess = sm.gauss_newton(
-            s.likelihood, s.ox, s.oy, self.res, points, pose, cfg.gn_iterations, 1e-4
+            field, s.ox, s.oy, self.res, points, pose, cfg.gn_iterations, 1e-4
         )
-        score = sm.score_pose(s.likelihood, s.ox, s.oy, self.res, points, pose)
+        score = sm.score_pose(field, s.ox, s.oy, self.res, points, pose)
         if score2 >= score and np.all(np.abs(refined[:2] - pose[:2]) < 2 * self.res):
             pose, score = refined, score2
         jump = between(guess, pose)

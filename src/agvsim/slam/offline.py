@@ -11,7 +11,7 @@ our own recordings can be added next to it), runs :class:`~.graph_slam.GraphSlam
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -23,7 +23,15 @@ from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.mapping import save_map_png, save_ros_map
 from agvsim.slam.recording import McapScanLog
 
-__all__ = ["READERS", "OfflineResult", "ScanLog", "open_log", "run_offline", "write_trajectory"]
+__all__ = [
+    "READERS",
+    "OfflineResult",
+    "ScanLog",
+    "map_scans",
+    "open_log",
+    "run_offline",
+    "write_trajectory",
+]
 
 
 class ScanLog(Protocol):
@@ -73,6 +81,7 @@ class OfflineResult:
     n_loop_closures: int
     log_duration_s: float  # last minus first scan time stamp
     processing_s: float  # SLAM and map writing, log reading included
+    warnings: tuple[str, ...] = ()  # e.g. a log cut off early (mapped up to the cut)
 
     @property
     def realtime_factor(self) -> float:
@@ -85,6 +94,30 @@ def write_trajectory(path: Path, timestamps: np.ndarray, poses: np.ndarray) -> P
     data = np.column_stack([timestamps, poses])
     np.savetxt(path, data, fmt=["%.6f", "%.6f", "%.6f", "%.6f"], delimiter=" ")
     return path
+
+
+def map_scans(
+    scans: Iterable[ScanRecord],
+    config: SlamConfig | None = None,
+    progress: Callable[[int], None] | None = None,
+    max_scans: int | None = None,
+) -> GraphSlam | None:
+    """Run :class:`GraphSlam` over scans in time order (finished: the last optimisation done);
+    None when there are none. ``progress(done)`` is called every 100 scans."""
+    slam: GraphSlam | None = None
+    n = 0
+    for rec in scans:
+        if max_scans is not None and n >= max_scans:
+            break
+        if slam is None:
+            slam = GraphSlam(rec.max_range_m, rec.laser_offset, config)
+        slam.update(rec.timestamp_s, rec.ranges_m, rec.angles_rad, rec.odom_pose)
+        n += 1
+        if progress is not None and n % 100 == 0:
+            progress(n)
+    if slam is not None:
+        slam.finish()
+    return slam
 
 
 def run_offline(
@@ -105,20 +138,12 @@ def run_offline(
     total = len(log) if max_scans is None else min(len(log), max_scans)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    slam: GraphSlam | None = None
-    n = 0
-    for rec in log:
-        if n >= total:
-            break
-        if slam is None:
-            slam = GraphSlam(rec.max_range_m, rec.laser_offset, config)
-        slam.update(rec.timestamp_s, rec.ranges_m, rec.angles_rad, rec.odom_pose)
-        n += 1
-        if progress is not None and n % 100 == 0:
-            progress(n, total)
+    slam = map_scans(
+        log, config, None if progress is None else lambda done: progress(done, total), total
+    )
     if slam is None:
         raise ValueError(f"{log_path}: the log holds no laser scans")
-    slam.finish()
+    n = len(slam.scan_times)
     stamps, poses = slam.trajectory()
     traj = write_trajectory(out / "trajectory.txt", stamps, poses)
     grid = slam.occupancy_map()
@@ -136,4 +161,5 @@ def run_offline(
         len(slam.loop_edges),
         float(stamps[-1] - stamps[0]) if n else 0.0,
         time.perf_counter() - t0,
+        tuple(log.warnings()) if isinstance(log, CarmenLog) else (),
     )

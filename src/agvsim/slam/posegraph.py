@@ -31,6 +31,7 @@ own initial guesses (intel 45.0047, city10000 511.985) and of M3500 from its odo
 
 from __future__ import annotations
 
+import enum
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -41,10 +42,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
+from agvsim.slam.posegraph_init import chordal_poses
 from agvsim.slam.robust import RobustKernel, robust_cost_and_weights
 from agvsim.slam.se2 import rotation_matrices, wrap_angle
 
 __all__ = [
+    "Initialisation",
     "IterationInfo",
     "OptimizeResult",
     "PoseGraph",
@@ -245,6 +248,49 @@ def _errors_jacobians(
     return e, a, b
 
 
+class Initialisation(enum.StrEnum):
+    """Where :func:`optimize` starts.
+
+    * ``given``:   the graph's poses (a warm start: online SLAM re-optimising its own graph);
+    * ``chordal``: :func:`~.posegraph_init.chordal_poses`, which ignores the given poses;
+    * ``auto``:    whichever of the two has the lower chi2.
+    """
+
+    GIVEN = "given"
+    CHORDAL = "chordal"
+    AUTO = "auto"
+
+
+def initial_guess(
+    graph: PoseGraph, initialisation: Initialisation | str, fixed: Sequence[int] = (0,)
+) -> F64:
+    """The start :func:`optimize` uses (see :class:`Initialisation`), (N, 3). The chordal start
+    keeps the first fixed node where it is (the gauge); with several fixed nodes, or nodes not
+    connected to it, the given poses are kept (for those nodes)."""
+    init = Initialisation(initialisation)
+    poses = graph.poses.copy()
+    fixed_idx = [int(f) for f in np.asarray(fixed, dtype=np.int64).reshape(-1)]
+    if init is Initialisation.GIVEN or len(fixed_idx) != 1 or graph.n_edges == 0:
+        return poses
+    anchor = fixed_idx[0]
+    chordal = chordal_poses(
+        graph.n_nodes,
+        graph.edge_i,
+        graph.edge_j,
+        graph.measurements,
+        graph.information,
+        anchor=anchor,
+        anchor_pose=poses[anchor],
+    )
+    if chordal is None:
+        return poses
+    placed = ~np.isnan(chordal[:, 0])
+    chordal[~placed] = poses[~placed]
+    if init is Initialisation.CHORDAL:
+        return chordal
+    return chordal if chi2(graph, chordal) < chi2(graph, poses) else poses
+
+
 @dataclass(frozen=True)
 class IterationInfo:
     """What :func:`optimize` reports to its ``verbose`` callback after each iteration."""
@@ -354,6 +400,7 @@ def optimize(
     fixed: Sequence[int] = (0,),
     initial_damping: float = 1e-4,
     verbose: Callable[[IterationInfo], None] | None = None,
+    initialisation: Initialisation | str = Initialisation.GIVEN,
 ) -> OptimizeResult:
     """Minimise ``sum_k rho(e_k^T Omega_k e_k)`` over the free poses by Levenberg-Marquardt.
 
@@ -363,13 +410,16 @@ def optimize(
     ``nu`` (2, 4, 8, ...). The robust weights are recomputed at every accepted point (IRLS).
     Converged when an accepted step lowers the cost by less than ``tolerance`` (relative),
     or the step is below ``1e-12`` of the state. ``fixed`` nodes (the gauge) stay put.
-    Does not modify ``graph``; the result's ``poses`` are a new array.
+    ``initialisation`` picks the start (:class:`Initialisation`; ``chi2_initial`` is the
+    given poses' chi2 whatever the start). Does not modify ``graph``; the result's ``poses``
+    are a new array.
     """
     kernel = RobustKernel(robust)
     if robust_scale <= 0.0:
         raise ValueError(f"robust_scale must be positive, got {robust_scale}")
     t0 = time.perf_counter()
-    poses = graph.poses.copy()
+    chi2_given = chi2(graph) if graph.n_edges else 0.0
+    poses = initial_guess(graph, initialisation, fixed)
     ei, ej, z, om = graph.edge_i, graph.edge_j, graph.measurements, graph.information
     neq = _NormalEquations(graph.n_nodes, ei, ej, fixed)
     free_rows = neq.var >= 0
@@ -381,12 +431,12 @@ def optimize(
         return float(cost.sum()), float(s.sum()), w, e, a, b
 
     cost, c2, w, e, a, b = evaluate(poses, True)
-    cost0, chi2_0 = cost, c2
+    cost0, chi2_0 = cost, chi2_given
     lam, nu = initial_damping, 2.0
     converged = False
     it = 0
     if neq.n == 0 or graph.n_edges == 0 or cost == 0.0:  # nothing to move, or an exact fit
-        return OptimizeResult(poses, chi2_0, chi2_0, 0, True, cost0, cost0)
+        return OptimizeResult(poses, chi2_0, c2, 0, True, cost0, cost0)
     h, grad = neq.assemble(a, b, w[:, None, None] * om, e)
     for it in range(1, max_iterations + 1):
         dx = neq.solve(h, grad, lam)

@@ -1,0 +1,133 @@
+"""Faults a real robot's log may carry, applied to a stream of scans (robustness suite).
+
+Each :class:`Fault` turns a stream of :class:`~.carmen.ScanRecord` into another, lazily
+(a log is never held in memory), with the randomness from a ``numpy.random.Generator``:
+
+* ``freeze``: odometry stops changing for 2 to 10 scans (a stalled encoder message), then
+  jumps by everything it missed; one freeze starts on average every ``freeze_every_scans``;
+* ``thin``: only scans at least ``1 / thin_rate_hz`` after the last kept one remain;
+* ``scale``: odometry's translation increments are ``odometry_scale`` times too long;
+* ``heading-bias``: odometry's heading drifts by ``heading_bias_rad_per_s`` (a gyro bias);
+* ``drop``: each scan is lost with probability ``drop_fraction``;
+* ``range-noise``: ranges get Gaussian noise of ``range_noise_m`` (returns stay returns).
+
+Odometry faults act on the increments between consecutive scans, ``u_k = o_{k-1}^-1 o_k``,
+and compose the faulty increments again from the first scan's pose.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from agvsim.slam.carmen import ScanRecord
+from agvsim.slam.se2 import between, compose
+
+__all__ = ["Fault", "FaultConfig", "apply_fault"]
+
+
+class Fault(enum.StrEnum):
+    """The faults of the robustness suite (module docstring)."""
+
+    NONE = "none"
+    FREEZE = "freeze"
+    THIN = "thin"
+    SCALE = "scale"
+    HEADING_BIAS = "heading-bias"
+    DROP = "drop"
+    RANGE_NOISE = "range-noise"
+
+
+@dataclass(frozen=True)
+class FaultConfig:
+    """How strong each fault is (SI units)."""
+
+    freeze_every_scans: int = 150
+    freeze_min_scans: int = 2
+    freeze_max_scans: int = 10
+    thin_rate_hz: float = 1.5
+    odometry_scale: float = 1.05
+    heading_bias_rad_per_s: float = math.radians(1.0) / 60.0  # 1 deg a minute
+    drop_fraction: float = 0.1
+    range_noise_m: float = 0.03
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.freeze_min_scans <= self.freeze_max_scans:
+            raise ValueError(
+                f"freeze scans must satisfy 1 <= min <= max, got "
+                f"{self.freeze_min_scans}, {self.freeze_max_scans}"
+            )
+        for name in ("freeze_every_scans", "thin_rate_hz", "odometry_scale"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if not 0.0 <= self.drop_fraction < 1.0:
+            raise ValueError(f"drop_fraction must lie in [0, 1), got {self.drop_fraction}")
+        if self.range_noise_m < 0:
+            raise ValueError(f"range_noise_m must be >= 0, got {self.range_noise_m}")
+
+
+def apply_fault(
+    scans: Iterable[ScanRecord],
+    fault: Fault | str,
+    rng: np.random.Generator,
+    cfg: FaultConfig | None = None,
+) -> Iterator[ScanRecord]:
+    """The scans with ``fault`` applied (see the module docstring)."""
+    kind = Fault(fault)
+    c = cfg or FaultConfig()
+    if kind is Fault.NONE:
+        yield from scans
+    elif kind is Fault.THIN:
+        last = -math.inf
+        for rec in scans:
+            if rec.timestamp_s - last >= 1.0 / c.thin_rate_hz:
+                last = rec.timestamp_s
+                yield rec
+    elif kind is Fault.DROP:
+        for rec in scans:
+            if rng.random() >= c.drop_fraction:
+                yield rec
+    elif kind is Fault.RANGE_NOISE:
+        for rec in scans:
+            r = rec.ranges_m
+            noisy = r + rng.normal(0.0, c.range_noise_m, r.shape)
+            noisy = np.where(np.isfinite(r), np.clip(noisy, 0.0, rec.max_range_m * 0.999), r)
+            yield replace(rec, ranges_m=noisy)
+    else:
+        yield from _odometry_fault(scans, kind, rng, c)
+
+
+def _odometry_fault(
+    scans: Iterable[ScanRecord], kind: Fault, rng: np.random.Generator, c: FaultConfig
+) -> Iterator[ScanRecord]:
+    prev_true: np.ndarray | None = None
+    prev_time = 0.0
+    pose = np.zeros(3)  # the faulty odometry as it would have run on (no freeze)
+    frozen_left = 0
+    last_out = np.zeros(3)
+    for rec in scans:
+        true = rec.odom_pose
+        if prev_true is None:
+            pose = true.copy()
+        else:
+            u = between(prev_true, true)
+            if kind is Fault.SCALE:
+                u = np.array([u[0] * c.odometry_scale, u[1] * c.odometry_scale, u[2]])
+            elif kind is Fault.HEADING_BIAS:
+                dt_s = rec.timestamp_s - prev_time
+                u = u + np.array([0.0, 0.0, c.heading_bias_rad_per_s * dt_s])
+            pose = compose(pose, u)
+        prev_true, prev_time = true, rec.timestamp_s
+        out = pose
+        if kind is Fault.FREEZE:
+            if frozen_left == 0 and rng.random() < 1.0 / c.freeze_every_scans:
+                frozen_left = int(rng.integers(c.freeze_min_scans, c.freeze_max_scans + 1))
+            if frozen_left > 0:  # repeats the last pose; the scan after the last frozen one
+                out = last_out  # jumps by all the motion it missed
+                frozen_left -= 1
+        last_out = np.asarray(out, np.float64).copy()
+        yield replace(rec, odom_pose=last_out.copy())

@@ -1,0 +1,142 @@
+"""Odometry that tracking can doubt: reference prediction, stalls, gates, growing windows,
+noise floors; end to end on a synthetic hall with odometry that freezes and jumps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_graph_slam import ANGLES, cast, loop_path
+
+from agvsim.slam.frontend import OdometryFusion, TrackingConfig
+from agvsim.slam.graph_slam import GraphSlam, SlamConfig
+from agvsim.slam.odometry_check import DoubtConfig, OdometryCheck
+from agvsim.slam.se2 import between, wrap_angle
+
+
+def test_prediction_from_the_reference_after_a_freeze() -> None:
+    """Hand-worked: the reference is pose (1, 2, 0) with odometry (0, 0, 0). Two scans refute
+    odometry (frozen at 0); then odometry jumps to (1, 0, pi/2): from the reference that is
+    (1, 2) + (1, 0) = (2, 2) heading pi/2, whatever tracking did during the freeze."""
+    chk = OdometryCheck(DoubtConfig())
+    chk.accept(np.array([1.0, 2.0, 0.0]), np.zeros(3), doubted=False)
+    chk.accept(np.array([1.3, 2.0, 0.1]), np.zeros(3), doubted=True)
+    chk.accept(np.array([1.6, 2.1, 0.3]), np.zeros(3), doubted=True)
+    assert chk.since_ref == 3
+    cands = chk.candidates(
+        np.array([1.6, 2.1, 0.3]), np.zeros(3), np.array([1.0, 0.0, math.pi / 2])
+    )
+    assert len(cands) == 2
+    np.testing.assert_allclose(cands[1], [2.0, 2.0, math.pi / 2], atol=1e-12)
+    # scan to scan the jump is added on top of the motion tracking already followed
+    np.testing.assert_allclose(cands[0][2], wrap_angle(0.3 + math.pi / 2), atol=1e-12)
+
+
+def test_reference_moves_on_after_max_doubt_scans() -> None:
+    chk = OdometryCheck(DoubtConfig(max_doubt_scans=3))
+    chk.accept(np.zeros(3), np.zeros(3), doubted=False)
+    for k in range(1, 3):
+        chk.accept(np.array([0.1 * k, 0, 0]), np.zeros(3), doubted=True)
+        assert chk.ref_pose is not None and chk.ref_pose[0] == 0.0
+    chk.accept(np.array([0.3, 0, 0]), np.zeros(3), doubted=True)  # the third in a row
+    assert chk.ref_pose is not None and chk.ref_pose[0] == pytest.approx(0.3)
+    assert chk.since_ref == 1 and chk.n_doubted == 3
+
+
+def test_stall_while_moving_offers_the_last_motion() -> None:
+    chk = OdometryCheck(DoubtConfig())
+    chk.accept(np.zeros(3), np.zeros(3), doubted=False)
+    chk.accept(np.array([0.1, 0.0, 0.02]), np.array([0.1, 0.0, 0.02]), doubted=False)
+    odom = np.array([0.1, 0.0, 0.02])  # unchanged: stalled while moving 0.1 m a scan
+    cands = chk.candidates(np.array([0.1, 0.0, 0.02]), odom, odom)
+    assert chk.stall
+    np.testing.assert_allclose(between(cands[0], cands[1]), [0.1, 0.0, 0.02], atol=1e-12)
+    assert chk.disagrees(cands[0], cands[1], 0.5, 0.5, None, None)  # a stall always refutes
+    # standing still before: an unchanged odometry is no stall
+    still = OdometryCheck(DoubtConfig())
+    still.accept(np.zeros(3), np.zeros(3), doubted=False)
+    still.accept(np.zeros(3), np.zeros(3), doubted=False)
+    assert len(still.candidates(np.zeros(3), np.zeros(3), np.zeros(3))) == 1 and not still.stall
+
+
+def test_gate_uses_learnt_spread_floors_and_the_fit_margin() -> None:
+    """Gate = max(floor, 4 sqrt(n s_o^2 + s_m^2)). With s_o^2 = 0.01 m^2 per scan, n = 4 and
+    s_m^2 = 0: 4 * sqrt(0.04) = 0.8 m; with tiny noises the 0.1 m / 3 deg floors apply."""
+    chk = OdometryCheck(DoubtConfig())
+    chk.since_ref = 4
+    guess = np.zeros(3)
+    big = (0.01, 1e-8)
+    assert not chk.disagrees(guess, np.array([0.79, 0.0, 0.0]), 0.9, 0.1, big, (0.0, 0.0))
+    assert chk.disagrees(guess, np.array([0.81, 0.0, 0.0]), 0.9, 0.1, big, (0.0, 0.0))
+    tiny = (1e-10, 1e-10)
+    assert not chk.disagrees(guess, np.array([0.09, 0.0, 0.0]), 0.9, 0.1, tiny, None)
+    assert chk.disagrees(guess, np.array([0.11, 0.0, 0.0]), 0.9, 0.1, tiny, None)
+    assert chk.disagrees(guess, np.array([0.0, 0.0, math.radians(3.1)]), 0.9, 0.1, tiny, None)
+    # the scan fits no better at the match (a featureless corridor): odometry is kept
+    assert not chk.disagrees(guess, np.array([2.0, 0.0, 0.0]), 0.5, 0.48, tiny, None)
+    off = OdometryCheck(DoubtConfig(enabled=False))
+    assert not off.disagrees(guess, np.array([2.0, 0.0, 0.0]), 0.9, 0.1, tiny, None)
+
+
+def test_search_windows_grow_with_the_scans_since_the_reference() -> None:
+    """Heading variance 1e-4 rad^2 a scan: after 25 scans the std is 0.05 rad and the window
+    3 x 0.05 = 0.15 rad; after one scan 0.03 rad, under the 6 deg base; capped at 45 deg."""
+    chk = OdometryCheck(DoubtConfig())
+    base_m, base_rad = 0.15, math.radians(6.0)
+    var = (1e-6, 1e-4)
+    chk.since_ref = 1
+    assert chk.windows(var, base_m, base_rad) == (base_m, base_rad)
+    chk.since_ref = 25
+    assert chk.windows(var, base_m, base_rad)[1] == pytest.approx(0.15)
+    chk.since_ref = 10**6
+    assert chk.windows(var, base_m, base_rad) == (pytest.approx(0.4), pytest.approx(math.pi / 4))
+    assert chk.windows(None, base_m, base_rad) == (base_m, base_rad)
+
+
+def test_fusion_noise_floor_follows_the_motion() -> None:
+    """Floors 1 % of the distance, 1 % of the turn plus 0.25 deg per metre: a step of 0.5 m
+    turning 0.1 rad gives (0.005 m)^2 and (0.001 + 0.5 * 0.25 deg)^2."""
+    cfg = TrackingConfig()
+    fusion = OdometryFusion(
+        10, 3, (cfg.odom_floor_m_per_m, cfg.odom_floor_rad_per_rad, cfg.odom_floor_rad_per_m)
+    )
+    v_t, v_r = fusion.floor_variance(np.array([0.3, 0.4, 0.1]))
+    assert v_t == pytest.approx(0.005**2)
+    assert v_r == pytest.approx((0.001 + 0.5 * math.radians(0.25)) ** 2)
+    assert fusion.floor_variance(np.zeros(3)) == (0.0, 0.0)
+
+
+def freezing_odometry(truth: np.ndarray, every: int, length: int) -> np.ndarray:
+    """Exact odometry that repeats its last value for ``length`` scans every ``every`` scans,
+    then jumps back to the truth."""
+    odom = truth.copy()
+    for start in range(every, len(truth) - length, every):
+        odom[start : start + length] = truth[start - 1]
+    return odom
+
+
+def track_error(truth: np.ndarray, odom: np.ndarray, doubt: DoubtConfig) -> tuple[float, int]:
+    """Largest position error (m) of the SLAM trajectory, both started at their first pose,
+    and the number of scans whose match refuted odometry."""
+    rng = np.random.default_rng(3)
+    cfg = SlamConfig(tracking=TrackingConfig(doubt=doubt))
+    slam = GraphSlam(30.0, config=cfg)
+    for k, (pose, o) in enumerate(zip(truth, odom, strict=True)):
+        slam.update(0.2 * k, cast(pose) + rng.normal(0.0, 0.01, ANGLES.size), ANGLES, o)
+    slam.finish()
+    _, est = slam.trajectory()
+    d = between(est[0], est) - between(truth[0], truth)
+    return float(np.hypot(d[:, 0], d[:, 1]).max()), slam.tracker.check.n_doubted
+
+
+def test_freeze_then_jump_is_followed_by_scan_matching() -> None:
+    # 0.15 m or 10 deg a scan; odometry frozen 10 scans out of every 25, then it jumps by up
+    # to 1.5 m or 90 deg
+    truth = loop_path(0.98, step_m=0.15)
+    odom = freezing_odometry(truth, 25, 10)
+    err, doubted = track_error(truth, odom, DoubtConfig())
+    blind, _ = track_error(truth, odom, DoubtConfig(enabled=False))
+    assert doubted >= 60  # the frozen scans were caught (measured 83 of 80 frozen + jumps)
+    assert err < 0.1  # measured 0.03 m
+    assert blind > 1.0  # trusted blindly, each jump is added twice: measured 10 m

@@ -1,0 +1,102 @@
+"""Faults of the robustness suite: each does what it says, and only that, deterministically."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agvsim.slam.carmen import ScanRecord
+from agvsim.slam.perturb import Fault, FaultConfig, apply_fault
+from agvsim.slam.se2 import between, compose
+
+
+def scans(n: int = 400, rate_hz: float = 5.0) -> list[ScanRecord]:
+    """A robot driving 0.1 m and turning 0.05 rad per scan; 10 beams, one without a return."""
+    pose = np.array([1.0, -2.0, 0.3])
+    out = []
+    ranges = np.array([1.0, 2.0, np.inf, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0])
+    for k in range(n):
+        out.append(
+            ScanRecord(k / rate_hz, ranges.copy(), np.linspace(-1, 1, 10), 80.0, pose, np.zeros(3))
+        )
+        pose = compose(pose, np.array([0.1, 0.0, 0.05]))
+    return out
+
+
+def run(fault: str, seed: int = 0, cfg: FaultConfig | None = None) -> list[ScanRecord]:
+    return list(apply_fault(scans(), fault, np.random.default_rng(seed), cfg))
+
+
+def steps(recs: list[ScanRecord]) -> np.ndarray:
+    o = np.array([r.odom_pose for r in recs])
+    return between(o[:-1], o[1:])
+
+
+def test_none_is_the_identity_and_faults_are_deterministic() -> None:
+    base = scans()
+    same = list(apply_fault(base, "none", np.random.default_rng(0)))
+    assert all(a is b for a, b in zip(base, same, strict=True))
+    for f in Fault:
+        a, b = run(f, seed=5), run(f, seed=5)
+        assert [r.timestamp_s for r in a] == [r.timestamp_s for r in b]
+        for ra, rb in zip(a, b, strict=True):
+            np.testing.assert_array_equal(ra.odom_pose, rb.odom_pose)
+            np.testing.assert_array_equal(ra.ranges_m, rb.ranges_m)
+
+
+def test_scale_lengthens_translation_only() -> None:
+    u = steps(run("scale"))
+    np.testing.assert_allclose(u[:, 0], 0.105, atol=1e-12)
+    np.testing.assert_allclose(u[:, 2], 0.05, atol=1e-12)
+
+
+def test_heading_bias_adds_rate_times_time() -> None:
+    cfg = FaultConfig(heading_bias_rad_per_s=0.01)
+    u = steps(run("heading-bias", cfg=cfg))
+    np.testing.assert_allclose(u[:, 2], 0.05 + 0.01 * 0.2, atol=1e-12)
+    np.testing.assert_allclose(u[:, 0], 0.1, atol=1e-12)
+
+
+def test_freeze_repeats_then_jumps_back_to_the_truth() -> None:
+    cfg = FaultConfig(freeze_every_scans=30)
+    base, out = scans(), run("freeze", seed=2, cfg=cfg)
+    u = steps(out)
+    frozen = np.all(u == 0.0, axis=1)
+    assert frozen.sum() >= 20
+    # every run of frozen increments lasts 2..10 scans; off a freeze odometry is the truth
+    runs = np.diff(np.flatnonzero(np.diff(np.concatenate([[0], frozen.astype(int), [0]]))))[::2]
+    assert runs.min() >= 2 and runs.max() <= 10
+    moving = np.concatenate([[True], ~frozen])
+    for r, b, m in zip(out, base, moving, strict=True):
+        if m:
+            np.testing.assert_allclose(r.odom_pose, b.odom_pose, atol=1e-9)
+
+
+def test_thin_keeps_the_rate() -> None:
+    t = np.array([r.timestamp_s for r in run("thin", cfg=FaultConfig(thin_rate_hz=1.5))])
+    assert np.diff(t).min() >= 1 / 1.5 - 1e-12 and np.diff(t).max() <= 1 / 1.5 + 0.2 + 1e-12
+
+
+def test_drop_loses_about_the_fraction() -> None:
+    kept = len(run("drop", cfg=FaultConfig(drop_fraction=0.25)))
+    assert 0.75 * 400 - 40 < kept < 0.75 * 400 + 40
+
+
+def test_range_noise_keeps_no_returns_and_the_range_limits() -> None:
+    out = run("range-noise", cfg=FaultConfig(range_noise_m=0.5))
+    r = np.array([x.ranges_m for x in out])
+    assert np.all(np.isinf(r[:, 2])) and np.all(np.isfinite(np.delete(r, 2, axis=1)))
+    noise = np.delete(r, 2, axis=1) - np.delete(scans()[0].ranges_m, 2)
+    assert noise.std() == pytest.approx(0.5, rel=0.1) and r[np.isfinite(r)].min() >= 0.0
+
+
+def test_bad_fault_settings_are_refused() -> None:
+    with pytest.raises(ValueError, match="drop_fraction"):
+        FaultConfig(drop_fraction=1.0)
+    with pytest.raises(ValueError, match="freeze scans"):
+        FaultConfig(freeze_min_scans=5, freeze_max_scans=2)
+    with pytest.raises(ValueError):
+        list(apply_fault(scans(3), "melt", np.random.default_rng(0)))
+    assert math.isfinite(FaultConfig().heading_bias_rad_per_s)
