@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from agvsim.behaviours import BEHAVIOURS
+from agvsim.fleet.config import LayoutConfig, Vda5050Config
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
@@ -309,6 +310,8 @@ class Scenario(_Strict):
     on_controller_error: Literal["stop_run", "stop_robot"] = Field(
         "stop_run", description="a failing controller ends the run, or only stops its robot"
     )
+    layout: LayoutConfig | None = Field(None, description="a track layout (LIF), docs/fleet.md")
+    vda5050: Vda5050Config | None = Field(None, description="VDA 5050 vehicles, docs/fleet.md")
     _base_dir: Path = PrivateAttr(default=Path("."))
     _source: str = PrivateAttr(default="scenario")
 
