@@ -187,3 +187,56 @@ class Mosquitto:
             self.proc.terminate()
             self.proc.wait(10)
             self.proc = None
+
+
+ROOM = """\
+#########
+#.......#
+#.......#
+#.......#
+#.......#
+#.......#
+#.......#
+#.......#
+#########"""
+
+BODIES = {
+    "differential": "{wheel_radius_m: 0.1, half_track_m: 0.2}",
+    "tricycle": "{wheel_radius_m: 0.1, wheelbase_m: 0.45, half_track_m: 0.2}",
+    "ackermann": "{wheel_radius_m: 0.1, wheelbase_m: 0.45, half_track_m: 0.2}",
+    "mecanum": "{wheel_radius_m: 0.05, half_length_m: 0.2, half_width_m: 0.2}",
+    "omni3": "{wheel_radius_m: 0.05, base_radius_m: 0.2}",
+}
+
+
+def room_scenario(
+    tmp: Path,
+    vehicles: list[tuple[str, str, str, float]],
+    layout: str = "{from_grid: true, simplify: false}",
+    version: str = "2.1.0",
+    picture: str = ROOM,
+    extra: str = "",
+) -> Path:
+    """A 7 x 7 m walled room (node ``r{row}c{col}`` at x = col - 4, y = 4 - row) with
+    vehicles ``(name, model, start node, heading deg)``."""
+    rows = "\n".join(f"    {r}" for r in picture.splitlines())
+    lines = [
+        f"name: fleet test\ndt_s: 0.05\nworld:\n  cell_size_m: 1.0\n  picture: |\n{rows}",
+        f"layout: {layout}",
+        "robots:",
+    ]
+    for name, model, _node, th in vehicles:
+        lines += [
+            f"  - name: {name}",
+            f"    model: {model}",
+            f"    params: {BODIES[model]}",
+            "    body: {length_m: 0.5, width_m: 0.4}",
+            f"    pose: {{x_m: 0, y_m: 0, theta_deg: {th}}}",
+            "    sensors:",
+            "      - {type: lidar, beams: 91, fov_deg: 270, range_max_m: 5, rate_hz: 20}",
+        ]
+    lines += [f"vda5050:\n  version: {version}\n  pick_time_s: 2\n  drop_time_s: 2\n  vehicles:"]
+    lines += [f"    - {{robot: {n}, start_node: {node}}}" for n, _m, node, _t in vehicles]
+    path = tmp / "fleet.yaml"
+    path.write_text("\n".join(lines) + "\n" + extra)
+    return path

@@ -40,7 +40,7 @@ class Leg:
         tolerance_m: float,
     ):
         self.lookahead_m, self.tolerance_m = lookahead_m, tolerance_m
-        self.node_ids: list[str] = [nodes[0].node_id]
+        self.nodes: list[OrderNode] = [nodes[0]]  # the leg's nodes (objects: loops repeat ids)
         self.node_s: list[float] = [0.0]
         self.speeds: list[float] = []
         self._points = [np.array([nodes[0].xy])]
@@ -57,7 +57,7 @@ class Leg:
         """Append edges (``nodes[0]`` is the current end of the leg); progress is kept."""
         for e, a, b, v in zip(edges, nodes[:-1], nodes[1:], speeds, strict=True):
             self._points.append(edge_points(e, a, b))
-            self.node_ids.append(b.node_id)
+            self.nodes.append(b)
             self.speeds.append(v)
         pts = np.vstack(self._points)
         keep = np.ones(len(pts), dtype=bool)
@@ -78,6 +78,14 @@ class Leg:
             self._pp.tracker.s = s0
         else:
             self._pp = None
+
+    @property
+    def node_ids(self) -> list[str]:
+        return [n.node_id for n in self.nodes]
+
+    def index(self, node: OrderNode) -> int | None:
+        """Where ``node`` (this very object) is on the leg."""
+        return next((k for k, n in enumerate(self.nodes) if n is node), None)
 
     @property
     def length_m(self) -> float:

@@ -386,15 +386,12 @@ class Vehicle:
         self.update_id = uid
         self._clear_errors("order")
         self._dirty = True
-        if self.leg is not None:
+        if self.leg is not None:  # driving towards the old decision point: drive on
             targets, t_edges = self._leg_targets()
-            done = len(self.leg.node_ids) - 1
-            if len(t_edges) > done:
+            k = next((j for j, n in enumerate(targets) if n is self.leg.nodes[-1]), None)
+            if k is not None and len(t_edges) > k:
                 self.leg.extend(
-                    targets[done:],
-                    t_edges[done:],
-                    self._speeds(t_edges[done:]),
-                    targets[-1].dev_xy_m,
+                    targets[k:], t_edges[k:], self._speeds(t_edges[k:]), targets[-1].dev_xy_m
                 )
 
     def _on_instant(self, payload: Any) -> None:
@@ -609,10 +606,10 @@ class Vehicle:
         leg = self.leg
         tw = leg.twist(self.pose, self.mob)
         # pass the nodes the progress has reached
-        while self.route_nodes and self.route_nodes[0].node_id in leg.node_ids[1:]:
+        while self.route_nodes and leg.index(self.route_nodes[0]) is not None:
             n = self.route_nodes[0]
-            k = leg.node_ids.index(n.node_id, 1)
-            if k < len(leg.node_ids) - 1:
+            k = leg.index(n) or 0
+            if k < len(leg.nodes) - 1:
                 if leg.s < leg.node_s[k] - 1e-6:
                     break
                 self._traverse(n)
