@@ -214,16 +214,20 @@ def factsheet(
                 "instantActions": limits.max_instant_actions,
             },
         }
+    timing = "minimum{}Interval" if v3 else "min{}Interval"
     limits_json["timing"] = {
-        "minOrderInterval": 0.0,
-        "minStateInterval": 0.0,
+        timing.format("Order"): 0.0,
+        timing.format("State"): 0.0,
         "defaultStateInterval": state_period_s,
         "visualizationInterval": vis_period_s,
     }
-    geometry = {
-        "wheelDefinitions": _wheels(spec),
-        "envelopes2d": [{"set": "body", "polygonPoints": [{"x": x, "y": y} for x, y in poly]}],
-    }
+    outline = [{"x": x, "y": y} for x, y in poly]
+    envelope = (
+        {"envelope2dId": "body", "vertices": outline}
+        if v3
+        else {"set": "body", "polygonPoints": outline}
+    )
+    geometry = {"wheelDefinitions": _wheels(spec), "envelopes2d": [envelope]}
     out = stamp.header("factsheet", t_s) | {
         "typeSpecification": type_spec,
         "physicalParameters": physical,
