@@ -116,6 +116,8 @@ class Master:
         self.c.loop_start()
 
     def _on(self, _c, _u, msg) -> None:
+        if msg.topic.endswith(("/order", "/instantActions")):
+            return  # what the master itself sent
         with self.lock:
             self.got.append((msg.topic, json.loads(msg.payload), msg.retain, time.monotonic()))
 

@@ -149,6 +149,8 @@ class MqttTransport:
             link.connect()
         t0 = time.monotonic()
         while time.monotonic() - t0 < timeout_s and not all(x.online for x in self.links):
+            if not any(x.client.socket() is not None for x in self.links):
+                break  # every connection was refused
             self.poll(0.05)
         return sum(x.online for x in self.links)
 
