@@ -255,6 +255,31 @@ def run(
 
 
 @app.command()
+def fleet(
+    scenario: Annotated[Path, typer.Argument(help="Scenario YAML with a 'vda5050:' block.")],
+    broker: Annotated[
+        str | None,
+        typer.Option(help="External broker mqtt://HOST:PORT (default: an embedded one)."),
+    ] = None,
+    speed: Annotated[
+        float, typer.Option(help="Simulated seconds per real second (0: as fast as possible).")
+    ] = 1.0,
+    duration: Annotated[
+        float | None, typer.Option(help="Stop after this many simulated seconds.")
+    ] = None,
+    export_layout: Annotated[
+        Path | None, typer.Option(help="Write the scenario's layout as a LIF file and exit.")
+    ] = None,
+) -> None:
+    """Run the scenario's VDA 5050 vehicles on MQTT for an external master (docs/fleet.md)."""
+    from agvsim.fleet.cli import fleet_command
+
+    code = fleet_command(scenario, broker, speed, duration, export_layout, out, err)
+    if code:
+        raise typer.Exit(code)
+
+
+@app.command()
 def validate(
     scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
     limit: Annotated[list[str] | None, typer.Option(help=LIMIT_HELP, metavar="NAME=VALUE")] = None,

@@ -343,6 +343,14 @@ class Simulation:
         self.collider.set_grid(grid)
         self._substep_len = 0.5 * min(grid.resolution_m, float(self._half.min()))
 
+    def set_boxes(self, boxes: np.ndarray) -> None:
+        """Change the static boxes ``(K, 5)`` of the running simulation (a box dropped on the
+        floor): sensors and collisions see them from the next step on."""
+        self.world = dc_replace(self.world, boxes=np.asarray(boxes, dtype=np.float64))
+        self._static_tab = box_tables(self.world.boxes)
+        if self.cameras is not None:
+            self.cameras.set_world(self.world)
+
     def footprints(self, poses: np.ndarray) -> np.ndarray:
         """(N, 5) oriented boxes (cx, cy, theta, half_length, half_width) of the bodies."""
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])

@@ -1,0 +1,87 @@
+"""``agvsim fleet SCENARIO``: run the scenario's VDA 5050 vehicles on MQTT."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Any
+
+from agvsim.fleet.transport import BrokerAddress
+
+
+def _say(console: Any, text: str) -> None:
+    console.print(text, markup=False, highlight=False)
+
+
+def fleet_command(
+    scenario: Path,
+    broker: str | None,
+    speed: float,
+    duration: float | None,
+    export_layout: Path | None,
+    out: Any,
+    err: Any,
+) -> int:
+    """Returns the exit code: 0 done, 1 cannot connect, 2 bad input, 130 interrupted."""
+    from agvsim.fleet.build import load_layout
+    from agvsim.fleet.run import FleetRun
+    from agvsim.scenario import ScenarioError, load_scenario
+    from agvsim.world.lif import save_lif
+
+    try:
+        if broker is not None:
+            BrokerAddress.parse(broker)
+        sc = load_scenario(scenario)
+        if export_layout is not None:
+            layout = load_layout(sc, sc._base_dir)
+            if layout is None:
+                raise ScenarioError(str(scenario), ["the scenario has no 'layout:' block"])
+            save_lif(export_layout, [layout], project=sc.name)
+            _say(
+                out,
+                f"wrote {export_layout} ({len(layout.nodes)} nodes, "
+                f"{len(layout.edges)} edges, {len(layout.stations)} stations)",
+            )
+            return 0
+        run = FleetRun(sc, broker)
+    except (ScenarioError, ValueError) as e:
+        _say(err, f"error: {e}")
+        return 2
+    except OSError as e:
+        _say(err, f"error: {e}")
+        return 1
+    fleet = run.fleet
+    try:
+        online = run.connect()
+        a = run.address
+        where = "embedded broker" if run.broker is not None else "broker"
+        _say(
+            out,
+            f"{where} mqtt://{a.host}:{a.port}; {online}/{len(fleet.vehicles)} vehicles "
+            f"online (VDA 5050 {fleet.config.version})",
+        )
+        if online == 0:
+            _say(err, f"error: no vehicle could connect to mqtt://{a.host}:{a.port}")
+            return 1
+        v0 = fleet.vehicles[0]
+        _say(
+            out,
+            f"topics: {fleet.topic(v0, '{order,instantActions,state,visualization,...}')}"
+            " (one serial per vehicle)",
+        )
+        for v in fleet.vehicles:
+            _say(
+                out,
+                f"  {v.cfg.serial:<10} {type(v.spec.model).__name__:<18} on "
+                f"{v.last_node.node_id if v.last_node else '-'}",
+            )
+        pace = "as fast as it can" if speed <= 0 else f"{speed:g}x real time"
+        _say(out, f"running ({pace}); Ctrl-C stops")
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
+        run.run(duration, speed)
+        return 0
+    except KeyboardInterrupt:
+        _say(out, "stopping: vehicles publish OFFLINE")
+        return 130
+    finally:
+        run.close()

@@ -1,0 +1,59 @@
+"""The scenario's ``layout:`` and ``vda5050:`` blocks (validated like the rest of the file)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class LayoutConfig(_Strict):
+    """A LIF file (path beside the scenario), or a layout derived from the world's grid."""
+
+    file: str | None = Field(None, description="LIF file (.json) next to the scenario")
+    layout_id: str | None = Field(None, description="which layout of the file (default: first)")
+    from_grid: bool = Field(False, description="derive nodes and edges from the free cells")
+    simplify: bool = Field(True, description="derived: nodes only at junctions, corners, ends")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> LayoutConfig:
+        if (self.file is None) == (not self.from_grid):
+            raise ValueError("layout: give either 'file' or 'from_grid: true'")
+        return self
+
+
+class VehicleEntry(_Strict):
+    robot: str = Field(description="name of the robot that is this vehicle")
+    serial: str | None = Field(
+        None, pattern=r"^[A-Za-z0-9_.:-]+$", description="serialNumber (default: the robot's name)"
+    )
+    start_node: str | None = Field(None, description="layout node it starts parked on")
+    battery_pct: float = Field(80.0, ge=0, le=100)
+
+
+class Vda5050Config(_Strict):
+    version: Literal["2.1.0", "3.0.0"] = "2.1.0"
+    interface_name: str = Field("uagv", pattern=r"^[A-Za-z0-9_.:-]+$")
+    manufacturer: str = Field("agvsim", pattern=r"^[A-Za-z0-9_.:-]+$")
+    map_id: str = "map"
+    safety_sensor: str = Field("lidar", description="the range fan the protective field reads")
+    max_speed_m_s: float = Field(1.0, gt=0, le=10)
+    state_period_s: float = Field(1.0, gt=0, le=30, description="state at least this often")
+    visualization_period_s: float = Field(1.0, ge=0, le=60, description="0: no visualization")
+    pick_time_s: float = Field(3.0, ge=0)
+    drop_time_s: float = Field(3.0, ge=0)
+    vehicles: list[VehicleEntry] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique(self) -> Vda5050Config:
+        robots = [v.robot for v in self.vehicles]
+        serials = [v.serial or v.robot for v in self.vehicles]
+        for what, vals in (("robots", robots), ("serials", serials)):
+            dup = sorted({x for x in vals if vals.count(x) > 1})
+            if dup:
+                raise ValueError(f"vda5050.vehicles: {what} must be unique; repeated: {dup}")
+        return self

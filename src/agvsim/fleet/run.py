@@ -1,0 +1,69 @@
+"""``agvsim fleet``: the fleet on MQTT, simulated time paced to real time (times ``speed``).
+
+Each step: the simulation steps (the vehicles read what arrived, drive and queue messages),
+the transport publishes, then waits on the sockets until the step's wall-clock time is due.
+Ctrl-C (or ``duration_s``) ends the run: every vehicle publishes OFFLINE and disconnects.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from datetime import datetime
+
+from agvsim.fleet.broker import EmbeddedBroker
+from agvsim.fleet.build import Fleet, build_fleet
+from agvsim.fleet.transport import BrokerAddress, MqttTransport
+from agvsim.scenario import Scenario
+
+
+class FleetRun:
+    """A fleet connected to a broker (the embedded one unless ``broker_url`` is given)."""
+
+    def __init__(
+        self,
+        sc: Scenario,
+        broker_url: str | None = None,
+        epoch: datetime | None = None,
+        seed: int | None = None,
+    ):
+        self.fleet: Fleet = build_fleet(sc, epoch=epoch, seed=seed)
+        self.broker = None if broker_url else EmbeddedBroker().start()
+        url = broker_url or self.broker.url  # type: ignore[union-attr]
+        self.address = BrokerAddress.parse(url)
+        self.transport = MqttTransport(self.address, self.fleet.vehicles, self.fleet.interface_name)
+
+    def connect(self, timeout_s: float = 10.0) -> int:
+        return self.transport.connect(timeout_s)
+
+    def step(self) -> None:
+        self.fleet.sim.step()
+        self.transport.flush()
+        self.transport.poll(0.0)
+
+    def run(
+        self,
+        duration_s: float | None,
+        speed: float = 1.0,
+        progress: Callable[[float], None] | None = None,
+    ) -> None:
+        """Step until ``duration_s`` of simulated time (None: for ever), paced so that
+        simulated time runs ``speed`` times real time (``speed <= 0``: as fast as it can)."""
+        sim = self.fleet.sim
+        t0_wall, t0_sim = time.monotonic(), sim.state.t_s
+        next_report = 0.0
+        while duration_s is None or sim.state.t_s - t0_sim < duration_s - 1e-9:
+            self.step()
+            if speed > 0:
+                due = t0_wall + (sim.state.t_s - t0_sim) / speed
+                while (left := due - time.monotonic()) > 0:
+                    self.transport.poll(left)
+            if progress is not None and time.monotonic() >= next_report:
+                next_report = time.monotonic() + 1.0
+                progress(sim.state.t_s)
+
+    def close(self) -> None:
+        self.transport.close()
+        if self.broker is not None:
+            time.sleep(0.2)  # let the broker hand the OFFLINE messages on
+            self.broker.stop()

@@ -1,0 +1,199 @@
+"""MQTT transport: one paho-mqtt client (one connection, one last will) per vehicle, all
+served from the simulation's own thread.
+
+There is no network thread per client: ``poll(timeout_s)`` waits on every socket at once
+(``selectors``) and lets paho read, write and keep alive; ``flush()`` publishes what the
+vehicles queued. A thousand vehicles are a thousand sockets and no thread. Each client sets
+its last will (``connection`` = CONNECTIONBROKEN, QoS 1, retained) before connecting, then
+publishes ONLINE, its factsheet (retained) and a state, and subscribes to its ``order`` and
+``instantActions``. A lost connection is retried every ``retry_s``; on reconnecting the
+vehicle republishes all of it.
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import selectors
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from urllib.parse import urlparse
+
+import paho.mqtt.client as mqtt
+
+from agvsim.fleet.vehicle import Vehicle
+
+QOS = {"connection": 1}  # every other topic: QoS 0 (VDA 5050 6.2)
+
+
+@dataclass(frozen=True)
+class BrokerAddress:
+    host: str
+    port: int
+
+    @classmethod
+    def parse(cls, url: str) -> BrokerAddress:
+        """``mqtt://HOST:PORT`` (port 1883 when left out)."""
+        u = urlparse(url if "://" in url else f"mqtt://{url}")
+        if u.scheme not in ("mqtt", "tcp") or not u.hostname:
+            raise ValueError(f"broker {url!r}: expected mqtt://HOST:PORT")
+        try:
+            port = u.port or 1883
+        except ValueError:
+            raise ValueError(f"broker {url!r}: the port must be a number 1..65535") from None
+        return cls(u.hostname, port)
+
+
+def raise_file_limit(n: int) -> None:
+    """Let this process hold ``n`` sockets and more, as far as the hard limit allows."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    want = min(hard, max(soft, n + 256)) if hard != resource.RLIM_INFINITY else max(soft, n + 256)
+    if want > soft:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
+
+
+class _Link:
+    """One vehicle's connection."""
+
+    def __init__(self, transport: MqttTransport, vehicle: Vehicle, prefix: str):
+        self.t, self.vehicle, self.prefix = transport, vehicle, prefix
+        self.online = False
+        self.next_try_s = 0.0
+        c = mqtt.Client(
+            mqtt.CallbackAPIVersion.VERSION2, client_id=prefix.replace("/", "_"), clean_session=True
+        )
+        will = vehicle.connection(vehicle.dialect.broken)
+        c.will_set(f"{prefix}/connection", json.dumps(will), qos=1, retain=True)
+        c.on_connect = self._on_connect
+        c.on_disconnect = self._on_disconnect
+        c.on_message = self._on_message
+        c.on_socket_open = lambda _c, _u, sock: transport._watch(sock, self)
+        c.on_socket_close = lambda _c, _u, sock: transport._unwatch(sock)
+        c.on_socket_register_write = lambda _c, _u, sock: transport._want_write(sock, self, True)
+        c.on_socket_unregister_write = lambda _c, _u, sock: transport._want_write(sock, self, False)
+        self.client = c
+
+    def connect(self) -> None:
+        self.next_try_s = time.monotonic() + self.t.retry_s
+        try:
+            self.client.connect(self.t.address.host, self.t.address.port, keepalive=15)
+        except OSError:
+            self.online = False
+
+    def _on_connect(self, client, _u, _flags, reason, _props) -> None:
+        if reason.is_failure:
+            return
+        self.online = True
+        client.subscribe([(f"{self.prefix}/order", 0), (f"{self.prefix}/instantActions", 0)])
+        self.vehicle.publish_all()
+        self.t._flush_one(self)
+
+    def _on_disconnect(self, _c, _u, _flags, _reason, _props) -> None:
+        self.online = False
+        self.next_try_s = time.monotonic() + self.t.retry_s
+
+    def _on_message(self, _c, _u, msg) -> None:
+        self.vehicle.receive(msg.topic.rsplit("/", 1)[-1], msg.payload)
+
+    def publish(self, topic: str, message: dict, retain: bool) -> None:
+        self.client.publish(
+            f"{self.prefix}/{topic}",
+            json.dumps(message, separators=(",", ":")),
+            qos=QOS.get(topic, 0),
+            retain=retain,
+        )
+
+
+class MqttTransport:
+    def __init__(
+        self,
+        address: BrokerAddress,
+        vehicles: Sequence[Vehicle],
+        interface_name: str,
+        retry_s: float = 1.0,
+    ):
+        self.address, self.retry_s = address, retry_s
+        raise_file_limit(len(vehicles))
+        self.sel = selectors.DefaultSelector()
+        self.links = [
+            _Link(
+                self,
+                v,
+                f"{interface_name}/{v.cfg.dialect.major}/{v.cfg.manufacturer}/{v.cfg.serial}",
+            )
+            for v in vehicles
+        ]
+        self._last_misc = 0.0
+
+    # socket bookkeeping (paho calls these)
+    def _watch(self, sock, link: _Link) -> None:
+        self.sel.register(sock, selectors.EVENT_READ, link)
+
+    def _unwatch(self, sock) -> None:
+        try:
+            self.sel.unregister(sock)
+        except (KeyError, ValueError):
+            pass
+
+    def _want_write(self, sock, link: _Link, on: bool) -> None:
+        ev = selectors.EVENT_READ | (selectors.EVENT_WRITE if on else 0)
+        try:
+            self.sel.modify(sock, ev, link)
+        except (KeyError, ValueError):
+            pass
+
+    def connect(self, timeout_s: float = 10.0) -> int:
+        """Connect every vehicle; returns how many are online after ``timeout_s`` at most."""
+        for link in self.links:
+            link.connect()
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < timeout_s and not all(x.online for x in self.links):
+            if not any(x.client.socket() is not None for x in self.links):
+                break  # every connection was refused
+            self.poll(0.05)
+        return sum(x.online for x in self.links)
+
+    def poll(self, timeout_s: float = 0.0) -> None:
+        """Serve the sockets for up to ``timeout_s`` (read, write, keepalive, reconnect)."""
+        for key, events in self.sel.select(timeout=max(0.0, timeout_s)):
+            c = key.data.client
+            if events & selectors.EVENT_READ:
+                c.loop_read()
+            if events & selectors.EVENT_WRITE:
+                c.loop_write()
+        now = time.monotonic()
+        if now - self._last_misc >= 1.0:
+            self._last_misc = now
+            for link in self.links:
+                link.client.loop_misc()
+                if not link.online and now >= link.next_try_s and link.client.socket() is None:
+                    link.connect()
+
+    def _flush_one(self, link: _Link) -> None:
+        for topic, msg, retain in link.vehicle.drain():
+            link.publish(topic, msg, retain)
+
+    def flush(self) -> None:
+        """Publish everything the vehicles queued (dropped while a vehicle is offline: its
+        state is republished whole when it reconnects)."""
+        for link in self.links:
+            if link.online:
+                self._flush_one(link)
+            else:
+                link.vehicle.drain()
+
+    def close(self) -> None:
+        """Publish OFFLINE and disconnect cleanly (no last will)."""
+        for link in self.links:
+            if link.online:
+                link.publish("connection", link.vehicle.connection("OFFLINE"), True)
+                link.client.disconnect()
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2.0 and any(
+            x.client.want_write() for x in self.links if x.client.socket() is not None
+        ):
+            self.poll(0.05)
+        for link in self.links:
+            link.client.loop_misc()
+        self.sel.close()

@@ -1,0 +1,147 @@
+"""VDA 5050 messages: factsheets of every model in both versions, 3.0.0 vehicles, and every
+kind of bad incoming message refused with the spec's error while the fleet carries on."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from fleet_helpers import action, instant, order
+from test_fleet_vehicle import ROW4, make, statuses
+
+from agvsim.fleet.messages import kinematic_kind
+from agvsim.fleet.schemas import VERSIONS, problems, schema
+from agvsim.kinematics import MODELS
+
+MODELS_ALL = list(MODELS)
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_every_schema_loads_and_is_valid(version: str) -> None:
+    from jsonschema.validators import validator_for
+
+    for topic in ("order", "instantActions", "state", "visualization", "connection", "factsheet"):
+        s = schema(version, topic)
+        validator_for(s).check_schema(s)
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+@pytest.mark.parametrize("model", MODELS_ALL)
+def test_factsheet_of_every_model_validates(tmp_path: Path, model: str, version: str) -> None:
+    r = make(tmp_path, [("agv1", model, "r4c1", 0.0)], version=version)
+    f = r.v().factsheet()
+    assert problems(version, "factsheet", f) == []
+    wheels = f["mobileRobotGeometry" if version == "3.0.0" else "agvGeometry"]["wheelDefinitions"]
+    assert len(wheels) == len(r.v().spec.model.wheel_names)
+    kind = {
+        "differential": "DIFF",
+        "mecanum": "OMNI",
+        "omni3": "OMNI",
+        "tricycle": "THREEWHEEL",
+        "ackermann": "THREEWHEEL",
+    }[model]
+    assert kinematic_kind(r.v().spec.model) == kind
+    spec = f["typeSpecification"]
+    assert spec.get("agvKinematic", spec.get("mobileRobotKinematic")) == kind
+    phys = f["physicalParameters"]
+    assert phys.get("length") == 0.5 and phys.get("width") == 0.4
+
+
+def test_v3_vehicle_runs_an_order_with_valid_messages(tmp_path: Path) -> None:
+    r = make(tmp_path, version="3.0.0")
+    acts = {"r4c3": [action("pk", "pick", "HARD")]}
+    r.v().receive("order", order(r.fleet.layout, ROW4[:3], node_actions=acts, version="3.0.0"))
+    r.step()
+    r.until(lambda: r.v().order_actions["pk"].status == "RUNNING", 20, "pick")
+    r.v().receive("instantActions", instant(("p", "startPause"), version="3.0.0"))
+    r.step(5)
+    s = r.states()[-1]  # Run validated every message against the 3.0.0 schemas
+    assert statuses(s) == {"pk": "PAUSED"}
+    assert s["instantActionStates"] == [
+        {"actionId": "p", "actionType": "startPause", "actionStatus": "FINISHED"}
+    ]
+    assert "powerSupply" in s and "mobileRobotPosition" in s
+    vis = [m for t, m in r.sent["agv1"] if t == "visualization"][-1]
+    assert vis["referenceStateHeaderId"] <= s["headerId"]
+    assert problems("3.0.0", "connection", r.v().connection("CONNECTION_BROKEN")) == []
+
+
+def _errors(r, serial: str = "agv1") -> list[str]:
+    return [e["errorType"] for e in r.last_state(serial)["errors"]]
+
+
+def test_every_bad_message_is_an_error_and_the_fleet_goes_on(tmp_path: Path) -> None:
+    r = make(
+        tmp_path, [("agv1", "differential", "r4c1", 0.0), ("agv2", "differential", "r2c1", 0.0)]
+    )
+    lay, v = r.fleet.layout, r.v()
+    good = order(lay, ROW4)
+    r.v("agv2").receive("order", order(lay, ["r2c1", "r2c2", "r2c3"], serial="agv2"))
+    cases: list[tuple[str, object, str, str]] = [
+        ("malformed JSON", b'{"headerId": 1, "orderId": ', "validationError", "JSON"),
+        ("not an object", b"[1, 2, 3]", "validationError", "not a JSON object"),
+        ("schema", {"headerId": 1}, "validationError", "is a required property"),
+        ("version", good | {"version": "1.1.0"}, "validationError", "1.1.0"),
+        ("serial", good | {"serialNumber": "agv9"}, "validationError", "agv9"),
+        ("bytes", b" " * 1_000_001, "validationError", "1000001 bytes"),
+    ]
+    unknown = order(lay, ROW4)
+    del unknown["nodes"][2]["nodePosition"]
+    unknown["nodes"][2]["nodeId"] = "nowhere"
+    unknown["edges"][1]["endNodeId"] = unknown["edges"][2]["startNodeId"] = "nowhere"
+    cases.append(("unknown node", unknown, "noRouteError", "nowhere"))
+    jump = order(lay, ROW4)
+    jump["nodes"][3]["sequenceId"] = 9
+    cases.append(("sequence jump", jump, "validationError", "sequenceId 9, expected 6"))
+    cases.append(("huge", order(lay, ["r4c1", "r4c2"] * 600), "orderError", "at most 1000"))
+    cases.append(
+        (
+            "action",
+            order(lay, ROW4, node_actions={"r4c2": [action("x", "fly", "NONE")]}),
+            "orderError",
+            "'fly'",
+        )
+    )
+    far = order(lay, ["r1c7", "r1c6"])
+    cases.append(("far start", far, "noRouteError", "first node"))
+    for name, payload, etype, words in cases:
+        data = payload if isinstance(payload, bytes) else json.dumps(payload).encode()
+        v.receive("order", data)
+        s = r.last_state()
+        assert s["errors"], name
+        err = s["errors"][-1]
+        assert err["errorType"] == etype, name
+        assert err["errorLevel"] == "WARNING"
+        assert words in err["errorDescription"], (name, err["errorDescription"])
+        assert s["orderId"] == "" and s["nodeStates"] == [], name
+    # the errors stay until an order is accepted; then they go, and it drives
+    assert len(r.last_state()["errors"]) == len(cases)
+    v.receive("order", good)
+    r.step()
+    assert r.states()[-1]["errors"] == []
+    # while busy, another order is refused and the first goes on
+    v.receive("order", order(lay, ROW4, order_id="o2"))
+    assert _errors(r) == ["orderError"]
+    r.until(lambda: v.last_node.node_id == "r4c5", 20, "the first order's end")
+    assert r.v("agv2").last_node.node_id == "r2c3"  # the other vehicle did its order
+    # instant actions: an order-only action, and a malformed message
+    v.receive("instantActions", instant(("i1", "pick")))
+    assert _errors(r)[-1] == "instantActionError"
+    v.receive("instantActions", b"nope")
+    assert _errors(r)[-1] == "validationError"
+
+
+def test_v3_error_names(tmp_path: Path) -> None:
+    r = make(tmp_path, version="3.0.0")
+    lay, v = r.fleet.layout, r.v()
+    v.receive("order", b"{")
+    assert _errors(r) == ["VALIDATION_FAILURE"]
+    v.receive("order", order(lay, ["r1c7", "r1c6"], version="3.0.0"))
+    assert _errors(r)[-1] == "START_NODE_OUT_OF_RANGE"
+    v.receive("instantActions", instant(("c", "cancelOrder"), version="3.0.0"))
+    assert _errors(r)[-1] == "NO_ORDER_TO_CANCEL"
+    v.receive("order", order(lay, ROW4, version="3.0.0"))
+    r.step()
+    v.receive("order", order(lay, ROW4, order_id="o2", version="3.0.0"))
+    assert _errors(r) == ["OTHER_ORDER_ACTIVE"]
