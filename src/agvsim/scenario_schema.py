@@ -17,6 +17,7 @@ from agvsim.behaviours import BEHAVIOURS
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
+from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
 from agvsim.sim.spec import ControlMode
 
 
@@ -128,6 +129,7 @@ class WorldConfig(_Strict):
     boxes: list[BoxObstacle] = []
     colors: ColorsConfig = ColorsConfig()
     markers: list[MarkerConfig] = []
+    floor: FloorConfig | None = Field(None, description="friction for robots with dynamics")
 
     @model_validator(mode="after")
     def _one_source(self) -> WorldConfig:
@@ -295,6 +297,9 @@ class RobotConfig(_Strict):
         [], description="robots whose true pose this robot's controller sees (obs.others)"
     )
     slam: SlamBlock | None = None
+    dynamics: DynamicsConfig | None = Field(
+        None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
+    )
 
 
 class Scenario(_Strict):
