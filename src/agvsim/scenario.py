@@ -23,9 +23,11 @@ from agvsim.control.adapters import WheelsFromTwist
 from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
+from agvsim.dynamics.vehicle import check_dynamics
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file
 from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
+from agvsim.scenario_dynamics import dynamics_spec, floor_spec
 from agvsim.scenario_schema import (
     AvoidConfig,
     CameraConfig,
@@ -346,7 +348,7 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
             "", [f"{where}.sensors: names must be unique (set 'name'), got {names}"]
         )
     th = float(np.deg2rad(rc.pose.theta_deg))
-    return RobotSpec(
+    spec = RobotSpec(
         name=rc.name,
         model=model,
         mode=rc.mode,
@@ -362,7 +364,14 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
             float(np.deg2rad(rc.odometry.steering_noise_deg)),
         ),
         color=rc.color,
+        dynamics=dynamics_spec(rc.dynamics, offset),
     )
+    if spec.dynamics is not None:
+        try:
+            check_dynamics(spec)
+        except ValueError as err:
+            raise ScenarioError("", [f"{where}.dynamics: {err}"]) from None
+    return spec
 
 
 def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any:
@@ -552,7 +561,7 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
         look = build_appearance(sc.world, grid)
     except ValueError as err:
         raise ScenarioError("", [f"world.{err}"]) from None
-    world = World(grid, boxes, look)
+    world = World(grid, boxes, look, floor=floor_spec(sc.world.floor))
     bindings = _bindings(sc, specs, base, grid)
     sim = Simulation(
         world,

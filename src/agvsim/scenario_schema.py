@@ -29,6 +29,7 @@ from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
 from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
+from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
 from agvsim.sim.spec import ControlMode
 
 
@@ -160,6 +161,7 @@ class WorldConfig(_Strict):
     boxes: list[BoxObstacle] = []
     colors: ColorsConfig = ColorsConfig()
     markers: list[MarkerConfig] = []
+    floor: FloorConfig | None = Field(None, description="friction for robots with dynamics")
 
     @model_validator(mode="after")
     def _one_source(self) -> WorldConfig:
@@ -329,6 +331,9 @@ class RobotConfig(_Strict):
         [], description="robots whose true pose this robot's controller sees (obs.others)"
     )
     slam: SlamBlock | None = None
+    dynamics: DynamicsConfig | None = Field(
+        None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
+    )
 
     @field_validator("params")
     @classmethod

@@ -4,6 +4,7 @@ Each step, for every robot together (structure of arrays, a loop over model kind
 
     commands  = controllers(observations)
     wheels    = actuate(commands)            # inverse or forward kinematics, limits
+    wheels    = dynamics(wheels)             # only robots with dynamics: forces, slip
     poses     = move(poses, wheels.twist)    # exact SE(2) integration, swept collision checks
     odometry  = dead_reckon(wheel encoders)  # noisy encoders, apart from the ground truth
     scans     = sense(poses)                 # sensors due at this time, one ray-cast call
@@ -27,6 +28,7 @@ from agvsim.control.api import (
     WheelCommand,
     command_to_array,
 )
+from agvsim.dynamics.vehicle import Dynamics
 from agvsim.geometry import box_tables
 from agvsim.kinematics import actuation
 from agvsim.kinematics.base import _integrate_rows, stack_models
@@ -123,6 +125,8 @@ class Simulation:
         has_cam = any(r.cameras for r in self.robots)
         self.cameras: CameraRig | None = CameraRig(self.robots, world) if has_cam else None
         self._groups = self._build_groups()
+        has_dyn = any(r.dynamics is not None for r in self.robots)
+        self.dynamics = Dynamics(self.robots, world.floor, W_MAX, S_MAX) if has_dyn else None
         hl_hw = np.array([r.footprint_half_m for r in self.robots], dtype=np.float64)
         self._half = hl_hw  # (N, 2)
         self._offset = np.array([r.body_offset_x_m for r in self.robots], dtype=np.float64)
@@ -184,6 +188,10 @@ class Simulation:
         n = self.n
         poses = np.array([r.initial_pose for r in self.robots], dtype=np.float64)
         self.state = SimState.zeros(n, self.sensors, W_MAX, S_MAX, poses)
+        if self.dynamics is not None:
+            self.dynamics.reset(self.state.steering[self.dynamics.idx])
+            st = self.state
+            st.wheel_torque_nm, st.wheel_slip_m_s, st.wheel_power_w = np.zeros((3, n, W_MAX))
         if self.cameras is not None:
             self.cameras.reset(self.state)
         # command buffers: twist (N, 3) and wheels (N, 3 = up to 4 driven? ) per robot
@@ -206,6 +214,8 @@ class Simulation:
         """Advance the simulation by one kinematics step of ``dt_s`` seconds."""
         self._control()
         act = self._actuate()
+        if self.dynamics is not None:
+            self._apply_dynamics(act)
         self._move(act)
         self._dead_reckon(act)
         self.state.t_s = (self.state.step + 1) * self.dt_s
@@ -332,6 +342,29 @@ class Simulation:
             twist[st.stopped] = 0.0
             st.wheel_speeds[st.stopped] = 0.0
         return twist
+
+    def _apply_dynamics(self, twist: np.ndarray) -> None:
+        """Robots with dynamics: the actuated wheel speeds and steering become targets of
+        their motors; their rows of ``twist`` (N, 3) and of the wheel state become what the
+        forces made of them this step (agvsim.dynamics)."""
+        st, dyn = self.state, self.dynamics
+        assert dyn is not None
+        i = dyn.idx
+        out = dyn.step(
+            st.poses[i],
+            st.wheel_speeds[i],
+            st.steering[i],
+            st.bump[i] | st.stopped[i],
+            self.dt_s,
+            st.t_s,
+        )
+        twist[i] = out.twist
+        st.wheel_speeds[i] = out.wheel_speeds
+        st.steering[i] = out.steering
+        st.steer_angles[i] = out.steer_angles
+        st.wheel_torque_nm[i] = out.torque_nm
+        st.wheel_slip_m_s[i] = out.slip_m_s
+        st.wheel_power_w[i] = out.power_w
 
     def set_grid(self, grid: OccupancyGrid) -> None:
         """Change the walls of the running simulation (a maze editor). Same resolution and

@@ -7,6 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from agvsim.dynamics.spec import DynamicsSpec, FloorFriction
 from agvsim.kinematics.base import KinematicModel
 from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
@@ -52,6 +53,7 @@ class RobotSpec:
     cameras: tuple[CameraSpec, ...] = ()
     odometry: OdometrySpec = field(default_factory=OdometrySpec)
     color: str = "#d62728"
+    dynamics: DynamicsSpec | None = None  # None: kinematic (commanded speeds reached at once)
 
     @property
     def footprint_half_m(self) -> tuple[float, float]:
@@ -75,6 +77,7 @@ class World:
     grid: OccupancyGrid
     boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # (K, 5) static boxes
     appearance: Appearance = field(default_factory=Appearance)  # colours, markers (camera)
+    floor: FloorFriction = field(default_factory=FloorFriction)  # read by robots with dynamics
 
     def __post_init__(self) -> None:
         b = np.asarray(self.boxes, dtype=np.float64).reshape(-1, 5)

@@ -128,6 +128,11 @@ class SimState:
     image_seq: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (C,) frames
     image_pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (C, 3) at frame
     next_image_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (C,) next frame
+    # planar dynamics (agvsim.dynamics; (0, W) without any robot that has it): per wheel, in
+    # the model's wheel order, zero for kinematic robots
+    wheel_torque_nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (N, W)
+    wheel_slip_m_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (N, W)
+    wheel_power_w: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (N, W)
 
     @classmethod
     def zeros(

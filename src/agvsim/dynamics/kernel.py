@@ -1,0 +1,262 @@
+"""The numba kernel of planar dynamics: one call advances every dynamic robot by one step.
+
+Per robot and sub-step h (docs/dynamics.md has the derivation):
+
+    steering   delta_rate -> clip((target - delta) / max(tau_s, h), +-rate), acceleration-limited
+    wheel i    contact velocity u = v_P + omega x p_i; slip s (wheel frame, or along the roller
+               axis a for Mecanum/omni wheels); friction F = -mu N q(|s|) s (friction circle);
+               J phi' = tau_motor(phi) - r F . e  integrated linearly implicitly in phi
+    body       m (v_c' + omega x v_c) = sum F,   I_c omega' = sum (p_i - c) x F_i  (explicit,
+               with the wheels' new speeds: Gauss-Seidel); the pose moves exactly on SE(2)
+               with the mean of the sub-step's old and new twist
+
+The step's start-to-end pose change is handed back as the constant twist that reproduces it
+(the SE(2) logarithm), so the engine's swept collision checks move the body as before.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from agvsim.kinematics.base import se2_step
+
+# columns of the per-robot table ``body`` (D, NB)
+B_MASS, B_INERTIA, B_CX, B_CY, B_RADIUS, B_WHEELBASE, B_GAIN, B_GEAR = 0, 1, 2, 3, 4, 5, 6, 7
+B_TMAX, B_TSTALL, B_W0, B_VSLIP, B_MAXSUB, B_DMAX, B_RATE, B_SACC = 8, 9, 10, 11, 12, 13, 14, 15
+B_STAU, B_TYRE, B_STEER, B_NW = 16, 17, 18, 19
+NB = 20
+# columns of the per-wheel table ``wheel`` (D, W, NWC)
+W_PX, W_PY, W_BETA, W_GAMMA, W_KIND, W_DRIVEN, W_STEER, W_NORMAL, W_J = 0, 1, 2, 3, 4, 5, 6, 7, 8
+NWC = 9
+KIND_2D = 0  # a standard wheel: friction in both directions (friction circle)
+KIND_1D = 1  # force only along the axis at angle gamma to the rolling direction (rollers)
+STEER_NONE, STEER_BICYCLE, STEER_ACKERMANN = 0, 1, 2
+MAX_SUBSTEPS = 100_000
+
+
+@njit(cache=True, error_model="numpy")
+def _q(slip: float, vslip: float, tyre: bool) -> float:
+    """Friction per unit of mu N and of slip speed: F = -mu N q(|s|) s."""
+    if tyre:
+        x = slip / vslip
+        return 1.0 / vslip if x < 1e-8 else math.tanh(x) / slip
+    return 1.0 / max(slip, vslip)
+
+
+@njit(cache=True, error_model="numpy")
+def motor_torque(
+    gain: float,
+    target: float,
+    phi: float,
+    gear: float,
+    tmax: float,
+    tstall: float,
+    w0: float,
+) -> tuple[float, float]:
+    """Wheel torque (N m) of the P speed controller within the motor's limits, and its
+    derivative in phi (-gain unsaturated, 0 saturated)."""
+    cmd = gain * (target - phi)
+    if cmd * phi > 0.0:  # driving: the torque-speed line of the motor
+        lim = min(tmax, tstall * (1.0 - abs(phi) * gear / w0))
+        lim = max(lim, 0.0)
+    else:  # braking (or starting): the full torque
+        lim = tmax
+    lim *= gear
+    if cmd > lim:
+        return lim, 0.0
+    if cmd < -lim:
+        return -lim, 0.0
+    return cmd, -gain
+
+
+@njit(cache=True, error_model="numpy")
+def substep_count(body: np.ndarray, wheel: np.ndarray, mu_n: np.ndarray, dt: float) -> int:
+    """Sub-steps for stability: h <= 0.5 min(m / sum k_i, I / sum k_i |p_i - c|^2) with the
+    contact stiffness k_i = mu N_i / slip_speed, and h <= max_substep_s."""
+    nw = int(body[B_NW])
+    csum, cyaw = 0.0, 0.0
+    for i in range(nw):
+        k = mu_n[i] / body[B_VSLIP]
+        dx, dy = wheel[i, W_PX] - body[B_CX], wheel[i, W_PY] - body[B_CY]
+        csum += k
+        cyaw += k * (dx * dx + dy * dy)
+    h = body[B_MAXSUB]
+    if csum > 0.0:
+        h = min(h, 0.5 * body[B_MASS] / csum)
+    if cyaw > 0.0:
+        h = min(h, 0.5 * body[B_INERTIA] / cyaw)
+    n = int(math.ceil(dt / h - 1e-9))
+    return min(max(n, 1), MAX_SUBSTEPS)
+
+
+@njit(cache=True, error_model="numpy")
+def wheel_angle(wheel: np.ndarray, delta: float, wheelbase: float) -> float:
+    """Rolling direction of a wheel in the robot frame (rad) for bicycle steering delta."""
+    kind = int(wheel[W_STEER])
+    if kind == STEER_BICYCLE:
+        return wheel[W_BETA] + delta
+    if kind == STEER_ACKERMANN:
+        k = math.tan(delta) / wheelbase
+        return wheel[W_BETA] + math.atan(k * wheelbase / (1.0 - k * wheel[W_PY]))
+    return wheel[W_BETA]
+
+
+@njit(cache=True, error_model="numpy")
+def se2_log(dx: float, dy: float, dth: float, dt: float) -> tuple[float, float, float]:
+    """The constant body twist that moves the identity to (dx, dy, dth) in dt (inverse of
+    ``se2_step``)."""
+    a = dth
+    if abs(a) < 1e-6:
+        sa = 1.0 - a * a / 6.0
+        ca = a / 2.0 - a * a * a / 24.0
+    else:
+        sa = math.sin(a) / a
+        h = math.sin(0.5 * a)
+        ca = 2.0 * h * h / a
+    det = sa * sa + ca * ca
+    vx = (sa * dx + ca * dy) / det / dt
+    vy = (-ca * dx + sa * dy) / det / dt
+    return vx, vy, a / dt
+
+
+@njit(cache=True, error_model="numpy")
+def step_robots(
+    dt: float,
+    poses: np.ndarray,  # (D, 3) world poses at the step start
+    regions: np.ndarray,  # (R, 5) x_min, y_min, x_max, y_max, mu
+    floor_mu: float,
+    body: np.ndarray,  # (D, NB)
+    wheel: np.ndarray,  # (D, W, NWC)
+    target: np.ndarray,  # (D, W) wheel-speed targets, rad/s (driven wheels)
+    delta_target: np.ndarray,  # (D,) steering target, rad
+    freeze: np.ndarray,  # (D,) bool: bumped or stopped, velocities to zero first
+    vel: np.ndarray,  # (D, 3) in/out: instantaneous twist at P
+    phi: np.ndarray,  # (D, W) in/out: wheel spin speeds, rad/s
+    delta: np.ndarray,  # (D,) in/out: steering angle
+    delta_rate: np.ndarray,  # (D,) in/out
+    out_twist: np.ndarray,  # (D, 3) the step's equivalent constant twist
+    out_angle: np.ndarray,  # (D, W) wheel rotation over the step, rad
+    out_steer: np.ndarray,  # (D, W) each wheel's rolling direction at the end, rad
+    out_torque: np.ndarray,  # (D, W) wheel torque at the end, N m
+    out_slip: np.ndarray,  # (D, W) slip speed |s| at the end, m/s
+    out_work: np.ndarray,  # (D, W) motor work over the step, J
+    out_nsub: np.ndarray,  # (D,) sub-steps taken
+) -> None:
+    n_rob = poses.shape[0]
+    n_reg = regions.shape[0]
+    mu_n = np.zeros(wheel.shape[1])
+    for d in range(n_rob):
+        b = body[d]
+        nw = int(b[B_NW])
+        if freeze[d]:
+            vel[d, :] = 0.0
+            phi[d, :] = 0.0
+            delta_rate[d] = 0.0
+        x0, y0, th0 = poses[d, 0], poses[d, 1], poses[d, 2]
+        c0, s0 = math.cos(th0), math.sin(th0)
+        for i in range(nw):
+            wx = x0 + c0 * wheel[d, i, W_PX] - s0 * wheel[d, i, W_PY]
+            wy = y0 + s0 * wheel[d, i, W_PX] + c0 * wheel[d, i, W_PY]
+            mu = floor_mu
+            for k in range(n_reg):
+                if regions[k, 0] <= wx < regions[k, 2] and regions[k, 1] <= wy < regions[k, 3]:
+                    mu = regions[k, 4]
+            mu_n[i] = mu * wheel[d, i, W_NORMAL]
+        n_sub = substep_count(b, wheel[d], mu_n, dt)
+        h = dt / n_sub
+        m, inertia, cx, cy = b[B_MASS], b[B_INERTIA], b[B_CX], b[B_CY]
+        r, vslip, tyre = b[B_RADIUS], b[B_VSLIP], b[B_TYRE] > 0.5
+        vx, vy, w = vel[d, 0], vel[d, 1], vel[d, 2]
+        dl, dr = delta[d], delta_rate[d]
+        rx, ry, rth = 0.0, 0.0, 0.0
+        for i in range(nw):
+            out_angle[d, i] = 0.0
+            out_work[d, i] = 0.0
+        for _ in range(n_sub):
+            if b[B_STEER] > 0.5:  # first-order servo, rate and acceleration limited
+                rate = min(max((delta_target[d] - dl) / max(b[B_STAU], h), -b[B_RATE]), b[B_RATE])
+                acc = b[B_SACC] * h
+                dr += min(max(rate - dr, -acc), acc)
+                dl += h * dr
+                if abs(dl) > b[B_DMAX]:
+                    dl = math.copysign(b[B_DMAX], dl)
+                    dr = 0.0
+            fx, fy, mz = 0.0, 0.0, 0.0
+            for i in range(nw):
+                wi = wheel[d, i]
+                px, py = wi[W_PX], wi[W_PY]
+                ang = wheel_angle(wi, dl, b[B_WHEELBASE])
+                ca, sa = math.cos(ang), math.sin(ang)
+                ux, uy = vx - w * py, vy + w * px  # contact point velocity, robot frame
+                driven = wi[W_DRIVEN] > 0.5
+                jw = wi[W_J]
+                p = phi[d, i]
+                tau = 0.0
+                if int(wi[W_KIND]) == KIND_2D:
+                    vl = ux * ca + uy * sa
+                    vt = -ux * sa + uy * ca
+                    if driven:
+                        sl = vl - r * p
+                        k = mu_n[i] * _q(math.hypot(sl, vt), vslip, tyre)
+                        tau, dtau = motor_torque(
+                            b[B_GAIN], target[d, i], p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0]
+                        )
+                        g = tau + r * k * sl
+                        p += h * g / (jw - h * (dtau - r * r * k))
+                        sl = vl - r * p
+                    else:  # free rolling
+                        p = vl / r
+                        sl = 0.0
+                    sm = math.hypot(sl, vt)
+                    k = mu_n[i] * _q(sm, vslip, tyre)
+                    fl, ft = -k * sl, -k * vt
+                    fxi, fyi = fl * ca - ft * sa, fl * sa + ft * ca
+                else:
+                    gam = wi[W_GAMMA]
+                    ax, ay = math.cos(ang + gam), math.sin(ang + gam)
+                    ea = math.cos(gam)
+                    su = ux * ax + uy * ay
+                    if driven:
+                        s = su - r * p * ea
+                        k = mu_n[i] * _q(abs(s), vslip, tyre)
+                        tau, dtau = motor_torque(
+                            b[B_GAIN], target[d, i], p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0]
+                        )
+                        g = tau + r * k * s * ea
+                        p += h * g / (jw - h * (dtau - r * r * ea * ea * k))
+                        s = su - r * p * ea
+                    else:  # free rolling along its rolling direction
+                        p = (ux * ca + uy * sa) / r
+                        s = su
+                    sm = abs(s)
+                    f = mu_n[i] * _q(sm, vslip, tyre) * s
+                    fxi, fyi = -f * ax, -f * ay
+                phi[d, i] = p
+                fx += fxi
+                fy += fyi
+                mz += (px - cx) * fyi - (py - cy) * fxi
+                out_angle[d, i] += p * h
+                out_work[d, i] += tau * p * h
+                out_torque[d, i] = tau
+                out_slip[d, i] = sm
+                out_steer[d, i] = ang
+            # the body: centre-of-mass velocity, constant in the world frame but for the forces
+            vcx, vcy = vx - w * cy, vy + w * cx
+            a = -w * h
+            ca, sa = math.cos(a), math.sin(a)
+            vcx, vcy = ca * vcx - sa * vcy + h * fx / m, sa * vcx + ca * vcy + h * fy / m
+            w0 = w
+            w += h * mz / inertia
+            vx0, vy0 = vx, vy
+            vx, vy = vcx + w * cy, vcy - w * cx
+            # the pose moves with the mean of the old and new twist (trapezoidal)
+            rx, ry, rth = se2_step(
+                rx, ry, rth, 0.5 * (vx0 + vx), 0.5 * (vy0 + vy), 0.5 * (w0 + w), h
+            )
+        vel[d, 0], vel[d, 1], vel[d, 2] = vx, vy, w
+        delta[d], delta_rate[d] = dl, dr
+        out_twist[d, 0], out_twist[d, 1], out_twist[d, 2] = se2_log(rx, ry, rth, dt)
+        out_nsub[d] = n_sub
