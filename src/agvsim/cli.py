@@ -180,11 +180,18 @@ def run(
         bool, typer.Option("--video", help="Also write top.mp4 (and one MP4 per camera).")
     ] = False,
     limit: Annotated[list[str] | None, typer.Option(help=LIMIT_HELP, metavar="NAME=VALUE")] = None,
+    controller_time_limit: Annotated[
+        float,
+        typer.Option(
+            help="Wall-clock seconds one step of a python controller may take; 0: no limit."
+        ),
+    ] = 10.0,
 ) -> None:
     """Run a scenario headless; write summary.json, trajectory.csv, plot.png and run.mcap
     (ROS 2 recording, see docs/recording.md) to --out."""
     from agvsim.runner import run_scenario
     from agvsim.scenario import ScenarioError
+    from agvsim.signals import Terminated, exit_code
     from agvsim.sim.engine import ControllerError
 
     progress = Progress(
@@ -216,6 +223,7 @@ def run(
                 tick,
                 record_mcap=not no_mcap,
                 video=video,
+                controller_time_limit_s=controller_time_limit or None,
             )
     except ScenarioError as e:
         _fail("error", e)
@@ -223,9 +231,10 @@ def run(
     except ControllerError as e:
         _fail("controller error", f"{e}\noutputs so far written to {out_dir}")
         raise typer.Exit(1) from None
-    except KeyboardInterrupt:
-        _fail("interrupted", f"outputs so far written to {out_dir}", "yellow")
-        raise typer.Exit(130) from None
+    except KeyboardInterrupt as e:
+        how = " (SIGTERM)" if isinstance(e, Terminated) else ""
+        _fail(f"interrupted{how}", f"outputs so far written to {out_dir}", "yellow")
+        raise typer.Exit(exit_code(e)) from None
     r = data["run"]
     out.print(
         f"simulated {r['simulated_time_s']:.1f} s in {r['wall_time_s']:.2f} s "
@@ -320,10 +329,22 @@ def sweep(
     """Run a grid of scenario variations x seeds (resumable); write results.parquet/.csv and
     comparison plots."""
     from agvsim.experiments.commands import sweep_command
+    from agvsim.signals import terminate_as_interrupt
 
-    code = sweep_command(
-        sweep_file, out_dir, workers, ray, ray_address, limit, not no_plot, quiet, dry_run, out, err
-    )
+    with terminate_as_interrupt():  # SIGTERM stops the sweep as Ctrl-C does
+        code = sweep_command(
+            sweep_file,
+            out_dir,
+            workers,
+            ray,
+            ray_address,
+            limit,
+            not no_plot,
+            quiet,
+            dry_run,
+            out,
+            err,
+        )
     raise typer.Exit(code)
 
 
@@ -343,8 +364,11 @@ def grade(
 ) -> None:
     """Grade controllers on a suite of tasks; print a score table, write grades.csv/json."""
     from agvsim.experiments.commands import grade_command
+    from agvsim.signals import terminate_as_interrupt
 
-    raise typer.Exit(grade_command(controllers, suite, out_dir, name, quiet, out, err))
+    with terminate_as_interrupt():  # SIGTERM stops the grading as Ctrl-C does
+        code = grade_command(controllers, suite, out_dir, name, quiet, out, err)
+    raise typer.Exit(code)
 
 
 @app.command()

@@ -1,7 +1,8 @@
 """Run a scenario headless and write its outputs (summary.json, trajectory.csv, plot.png).
 
-Whatever happens (the end, Ctrl-C, a failing controller), the outputs recorded so far are
-written before returning or re-raising.
+Whatever happens (the end, Ctrl-C, SIGTERM, a failing or hanging controller), the outputs
+recorded so far are written before returning or re-raising; while they are being written,
+Ctrl-C and SIGTERM wait (agvsim.signals), so no file is left half written.
 """
 
 from __future__ import annotations
@@ -16,7 +17,12 @@ import numpy as np
 from agvsim.record.outputs import TrajectoryWriter, summary, write_summary
 from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
 from agvsim.scenario_limits import Limits, steps_of
+from agvsim.signals import StopRequest, Terminated, hold_signals, terminate_as_interrupt
 from agvsim.sim.engine import ControllerError, Simulation
+
+# wall-clock seconds one call of a ``python`` controller may take in a run, a sweep or a
+# grading task (agvsim.sim.watchdog); ``agvsim run --controller-time-limit`` changes it
+CONTROLLER_TIME_LIMIT_S = 10.0
 
 if TYPE_CHECKING:
     from agvsim.online_slam import OnlineSlam
@@ -32,11 +38,44 @@ def run_scenario(
     progress: Callable[[float, float], None] | None = None,
     record_mcap: bool = True,
     video: bool = False,
+    controller_time_limit_s: float | None = CONTROLLER_TIME_LIMIT_S,
 ) -> dict:
     """Run to the end and write outputs; returns the summary dict. Raises ScenarioError for a
-    bad scenario (before anything runs); after a ControllerError or KeyboardInterrupt the
+    bad scenario (before anything runs); after a ControllerError or KeyboardInterrupt (Ctrl-C,
+    or :class:`~agvsim.signals.Terminated` for SIGTERM when called on the main thread) the
     outputs are written and the exception re-raised. ``record_mcap`` streams ``run.mcap``
-    (ROS 2 layouts, docs/recording.md); ``video`` writes ``top.mp4`` and camera videos."""
+    (ROS 2 layouts, docs/recording.md); ``video`` writes ``top.mp4`` and camera videos.
+    ``controller_time_limit_s``: wall clock per call of a ``python`` controller (None: none);
+    a call that takes longer ends the run as a controller error."""
+    with terminate_as_interrupt() as stop:
+        return _run(
+            scenario,
+            Path(out_dir),
+            duration_s,
+            seed,
+            record_every,
+            plot,
+            progress,
+            record_mcap,
+            video,
+            controller_time_limit_s,
+            stop,
+        )
+
+
+def _run(
+    scenario: str | Path | Scenario,
+    out: Path,
+    duration_s: float | None,
+    seed: int | None,
+    record_every: int,
+    plot: bool,
+    progress: Callable[[float, float], None] | None,
+    record_mcap: bool,
+    video: bool,
+    controller_time_limit_s: float | None,
+    stop: StopRequest,
+) -> dict:
     if isinstance(scenario, Scenario):
         sc, source = scenario, scenario._source
     else:
@@ -46,7 +85,10 @@ def run_scenario(
         sim = build(sc, seed=seed)
     except ScenarioError as err:
         raise ScenarioError(source, err.problems) from None
-    out = Path(out_dir)
+    try:
+        sim.controller_time_limit_s = controller_time_limit_s
+    except ValueError as err:
+        raise ScenarioError(source, [str(err)]) from None
     out.mkdir(parents=True, exist_ok=True)
     total = float(duration_s if duration_s is not None else sc.duration_s)
     try:  # finite, > 0 and within the scenario's max_steps
@@ -61,57 +103,62 @@ def run_scenario(
     trail_every = max(1, n_steps // 4000)
     status, error = "completed", None
     t0 = time.perf_counter()
-    writer.record()
-    for s in slams:
-        s.update()
     try:
-        for k in range(n_steps):
-            sim.step()
-            writer.record()
-            for o in observers:
-                o.record()
-            for s in slams:
-                s.update()
-            # a list, not a generator: every metric sees every step
-            if any([m.update(sim) for m in metrics.values()]):
-                status = "ended_by_metric"
-                break
-            if k % trail_every == 0:
-                for i, r in enumerate(sim.robots):
-                    trail[r.name].append(sim.state.poses[i, :2].copy())
-            if progress is not None and (k % 50 == 0 or k == n_steps - 1):
-                progress(sim.state.t_s, total)
+        writer.record()
+        for s in slams:
+            s.update()
+        with sim.enforcing_time_limit():  # of python controllers (agvsim.sim.watchdog)
+            for k in range(n_steps):
+                sim.step()
+                writer.record()
+                for o in observers:
+                    o.record()
+                for s in slams:
+                    s.update()
+                # a list, not a generator: every metric sees every step
+                if any([m.update(sim) for m in metrics.values()]):
+                    status = "ended_by_metric"
+                    break
+                if k % trail_every == 0:
+                    for i, r in enumerate(sim.robots):
+                        trail[r.name].append(sim.state.poses[i, :2].copy())
+                if progress is not None and (k % 50 == 0 or k == n_steps - 1):
+                    progress(sim.state.t_s, total)
+                if stop.requested:  # a SIGTERM whose exception a controller swallowed
+                    raise Terminated
         if sim.errors:  # on_controller_error: stop_robot -- the others went on
             status = "completed_with_controller_errors"
     except ControllerError as err:
         status, error = "controller_error", str(err)
         raise
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         status = "interrupted"
+        error = str(err) if isinstance(err, Terminated) else None
         raise
     finally:
         wall = time.perf_counter() - t0
-        writer.close()
-        for o in observers:
-            o.close()
-        data = summary(
-            sim,
-            wall,
-            {
-                "scenario": sc.name,
-                "source": source,
-                "status": status,
-                "error": error,
-                "requested_duration_s": total,
-                "trajectory_rows": writer.rows,
-            },
-        )
-        data["metrics"] = {name: m.result() for name, m in metrics.items()}
-        if slams:
-            data["slam"] = {s.name: s.write(out) for s in slams}
-        write_summary(out / "summary.json", data)
-        if plot:
-            _plot(sim, trail, out / "plot.png", sc.name)
+        with hold_signals():  # Ctrl-C / SIGTERM now wait until every output is written
+            writer.close()
+            for o in observers:
+                o.close()
+            data = summary(
+                sim,
+                wall,
+                {
+                    "scenario": sc.name,
+                    "source": source,
+                    "status": status,
+                    "error": error,
+                    "requested_duration_s": total,
+                    "trajectory_rows": writer.rows,
+                },
+            )
+            data["metrics"] = {name: m.result() for name, m in metrics.items()}
+            if slams:
+                data["slam"] = {s.name: s.write(out) for s in slams}
+            write_summary(out / "summary.json", data)
+            if plot:
+                _plot(sim, trail, out / "plot.png", sc.name)
     return data
 
 

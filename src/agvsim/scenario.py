@@ -388,7 +388,7 @@ def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any
     module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
     try:
         spec.loader.exec_module(module)  # type: ignore[union-attr]
-    except Exception as err:  # noqa: BLE001 - the user's file: report, don't crash
+    except (Exception, SystemExit) as err:  # noqa: BLE001 - the user's file: report, don't crash
         line = f" (line {err.lineno})" if isinstance(err, SyntaxError) and err.lineno else ""
         raise ScenarioError(
             "",
@@ -412,7 +412,7 @@ def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any
     if isinstance(obj, type) or (callable(obj) and _takes_no_arguments(obj)):
         try:
             return obj()
-        except Exception as err:  # noqa: BLE001 - the user's code: report, don't crash
+        except (Exception, SystemExit) as err:  # noqa: BLE001 - the user's code: report
             raise ScenarioError(
                 "", [f"{where}.controller.name: {cfg.name}() failed: {type(err).__name__}: {err}"]
             ) from None
@@ -485,7 +485,7 @@ def _bindings(
             key = (c, rc.model, rc.mode, rc.params.get("steering_geometry"))
             avoid_groups.setdefault(key, []).append(i)
         elif isinstance(c, PythonControllerConfig):
-            out.append(Binding(_load_python(c, base_dir, where), (i,)))
+            out.append(Binding(_load_python(c, base_dir, where), (i,), user_code=True))
     for (c, _model_kind, mode, _geo), idx in avoid_groups.items():
         spec0 = specs[idx[0]]
         sensor = next(s for s in spec0.sensors if s.name == c.sensor)

@@ -9,16 +9,16 @@ audience; the simulation never waits for a browser.
 from __future__ import annotations
 
 import logging
-import signal
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Protocol, TypeVar
 
 from agvsim.app.session import DEFAULT_OUT, Session
 from agvsim.scenario import Scenario, load_scenario
+from agvsim.signals import terminate_as_interrupt
 
 log = logging.getLogger("agvsim.app")
 
@@ -199,30 +199,16 @@ _AppT = TypeVar("_AppT", bound=_Stoppable)
 
 def run_until_stopped(app: _AppT, on_ready: Callable[[_AppT], None] | None = None) -> None:
     """The serve loop of ``agvsim serve`` and ``agvsim replay``: call ``on_ready(app)`` (the
-    app is started and listening), wait until Ctrl-C or SIGTERM, then ``app.stop()``, which
-    finishes what must be finished (a video being recorded) and closes the server."""
+    app is started and listening), wait until Ctrl-C or SIGTERM (agvsim.signals), then
+    ``app.stop()``, which finishes what must be finished (a video being recorded) and closes
+    the server."""
     if on_ready is not None:
         on_ready(app)
-    previous = _stop_on_sigterm()
-    try:
-        while True:
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        app.stop()
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-
-
-def _stop_on_sigterm() -> Any:
-    """Make SIGTERM (``kill``, a service manager) stop the app like Ctrl-C, so that a video
-    being recorded is closed; returns the previous handler (None off the main thread)."""
-
-    def stop(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    try:
-        return signal.signal(signal.SIGTERM, stop)
-    except ValueError:  # not the main thread: leave the signals alone
-        return None
+    with terminate_as_interrupt():
+        try:
+            while True:
+                time.sleep(0.5)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            app.stop()

@@ -20,6 +20,8 @@ from rich.progress import (
 )
 from rich.table import Table
 
+from agvsim.signals import exit_code
+
 
 def _fail(console: Console, label: str, message: object, style: str = "red") -> None:
     console.print(f"{label}:", style=style, end=" ")
@@ -101,7 +103,7 @@ def sweep_command(
                 limit=limit,
                 plots=plots,
             )
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (agvsim.signals.Terminated)
         _fail(
             err,
             "interrupted",
@@ -109,7 +111,7 @@ def sweep_command(
             "to go on where it stopped",
             "yellow",
         )
-        return 130
+        return exit_code(e)
     except (RuntimeError, ConnectionError) as e:  # Ray could not start or connect
         _fail(err, "error", e)
         return 1
@@ -215,9 +217,9 @@ def grade_command(
                     bar.update(job, advance=1, note=f"{g.task}: {g.status}")
 
                 everything += grade(c, suite, out_dir, on_task=done, name=name, student=who)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (agvsim.signals.Terminated)
         _fail(err, "interrupted", "grading stopped; no grades written", "yellow")
-        return 130
+        return exit_code(e)
     for who in students:
         _print_grades([g for g in everything if g.student == who], cfg.name, out)
     if len(controllers) > 1:

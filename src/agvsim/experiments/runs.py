@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from agvsim.record.outputs import summary
-from agvsim.runner import build_metrics, build_slams
+from agvsim.runner import CONTROLLER_TIME_LIMIT_S, build_metrics, build_slams
 from agvsim.scenario import Scenario, ScenarioError, build, parse_scenario
 from agvsim.sim.engine import ControllerError, Simulation
 
@@ -33,6 +33,8 @@ class RunTask:
     scenario: dict
     base_dir: str  # the scenario's relative files (maps, controllers) are found from here
     source: str  # for messages
+    # wall clock per call of a python controller: a hanging one ends its run, not the sweep
+    controller_time_limit_s: float | None = CONTROLLER_TIME_LIMIT_S
 
 
 def execute(task: RunTask) -> dict:
@@ -41,6 +43,7 @@ def execute(task: RunTask) -> dict:
         sc = parse_scenario(task.scenario, task.source)
         sc._base_dir, sc._source = Path(task.base_dir), task.source
         sim = build(sc, seed=task.seed)
+        sim.controller_time_limit_s = task.controller_time_limit_s
         return _simulate(sc, sim, task.source)
     except ScenarioError as err:  # e.g. a controller file that does not load
         return {"status": "error", "error": "; ".join(err.problems)}
@@ -57,14 +60,15 @@ def _simulate(sc: Scenario, sim: Simulation, source: str) -> dict:
     for s in slams:
         s.update()
     try:
-        for _ in range(n_steps):
-            sim.step()
-            for s in slams:
-                s.update()
-            # a list, not a generator: every metric sees every step
-            if any([m.update(sim) for m in metrics.values()]):
-                status = "ended_by_metric"
-                break
+        with sim.enforcing_time_limit():  # of python controllers (agvsim.sim.watchdog)
+            for _ in range(n_steps):
+                sim.step()
+                for s in slams:
+                    s.update()
+                # a list, not a generator: every metric sees every step
+                if any([m.update(sim) for m in metrics.values()]):
+                    status = "ended_by_metric"
+                    break
         if sim.errors:  # on_controller_error: stop_robot -- the others went on
             status = "completed_with_controller_errors"
     except ControllerError as err:

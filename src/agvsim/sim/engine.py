@@ -13,6 +13,7 @@ Each step, for every robot together (structure of arrays, a loop over model kind
 from __future__ import annotations
 
 from collections.abc import Sequence
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from dataclasses import replace as dc_replace
 from typing import Any
@@ -40,6 +41,7 @@ from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.kernels import move_bodies, pair_faults
 from agvsim.sim.spec import ControlMode, RobotSpec, World
 from agvsim.sim.state import SensorTable, SimState  # noqa: F401 - SensorTable in hints
+from agvsim.sim.watchdog import ControllerClock, TimeLimitExceeded, check_limit
 from agvsim.world.grid import OccupancyGrid
 
 W_MAX = 4  # most wheels of any model
@@ -47,21 +49,28 @@ S_MAX = 2  # most steered wheels of any model
 
 
 class ControllerError(RuntimeError):
-    """A controller raised or returned an invalid command."""
+    """A controller raised, returned an invalid command or ran past its time limit."""
 
     def __init__(self, robot: str, t_s: float, cause: BaseException):
-        super().__init__(f"controller of robot {robot!r} failed at t={t_s:.3f} s: {cause}")
+        what = (
+            str(cause)
+            if isinstance(cause, Exception | TimeLimitExceeded)
+            else f"it raised {type(cause).__name__}({cause})"  # SystemExit: not a way to stop
+        )
+        super().__init__(f"controller of robot {robot!r} failed at t={t_s:.3f} s: {what}")
         self.robot, self.t_s, self.cause = robot, t_s, cause
 
 
 @dataclass
 class Binding:
     """A controller and the robots (indices) it drives. ``batch`` controllers get arrays;
-    others are called once per robot with an ``Observation``."""
+    others are called once per robot with an ``Observation``. ``user_code``: the user's own
+    code (a ``python`` controller), held to ``Simulation.controller_time_limit_s``."""
 
     controller: Any
     robots: tuple[int, ...]
     batch: bool = False
+    user_code: bool = False
 
 
 @dataclass
@@ -91,6 +100,7 @@ class Simulation:
         seed: int = 0,
         knows: dict[str, Sequence[str]] | None = None,
         on_controller_error: str = "stop_run",
+        controller_time_limit_s: float | None = None,
     ):
         if not robots:
             raise ValueError("a simulation needs at least one robot")
@@ -106,6 +116,7 @@ class Simulation:
                 f"got {on_controller_error!r}"
             )
         self.on_controller_error = on_controller_error
+        self.controller_time_limit_s = controller_time_limit_s
         index = {n: k for k, n in enumerate(names)}
         self._knows: list[list[int]] = [[] for _ in robots]
         for who, whom in (knows or {}).items():
@@ -202,10 +213,16 @@ class Simulation:
         self._batch_slots: dict[bytes, dict[str, tuple[slice | np.ndarray, int]]] = {}
         self.errors: list[ControllerError] = []
         for b in self.bindings:
-            if b.batch:
-                b.controller.reset(len(b.robots), self.rng)
-            elif hasattr(b.controller, "reset"):
-                b.controller.reset()
+            try:
+                if b.batch:
+                    b.controller.reset(len(b.robots), self.rng)
+                elif hasattr(b.controller, "reset"):
+                    b.controller.reset()
+            except KeyboardInterrupt:
+                raise
+            except BaseException as exc:  # noqa: BLE001 - user code, SystemExit included
+                who = ",".join(self.robots[i].name for i in b.robots)
+                raise ControllerError(who, 0.0, exc) from exc
         self._sense(force=True)
         self._render(force=True)
 
@@ -228,20 +245,57 @@ class Simulation:
             self.step()
 
     # ------------------------------------------------------------------ stages
+    @property
+    def controller_time_limit_s(self) -> float | None:
+        """Wall-clock seconds each call of a ``user_code`` controller may take (None: no
+        limit), enforced inside ``with sim.enforcing_time_limit():``; a call that runs longer
+        fails like a controller that raised (see agvsim.sim.watchdog)."""
+        return None if self._clock is None else self._clock.limit_s
+
+    @controller_time_limit_s.setter
+    def controller_time_limit_s(self, limit_s: float | None) -> None:
+        checked = check_limit(limit_s)
+        self._clock = None if checked is None else ControllerClock(checked)
+        self._timing: ControllerClock | None = None
+
+    def enforcing_time_limit(self) -> AbstractContextManager[object]:
+        """Enforce ``controller_time_limit_s`` on the steps taken inside (a timer signal on
+        the main thread; elsewhere calls run unlimited)."""
+        return self._clock if self._clock is not None else nullcontext()
+
     def _control(self) -> None:
         st = self.state
-        for b, idx in zip(self.bindings, self._binding_idx, strict=True):
-            live = idx[~st.stopped[idx]]
-            if live.size == 0:
-                continue
-            try:
-                if b.batch:
-                    self._control_batch(b.controller, idx)
-                else:
-                    for i in live:
-                        self._control_one(b.controller, int(i))
-            except ControllerError as err:
-                self._controller_failed(err, idx if b.batch else None)
+        clock = self._clock if self._clock is not None and self._clock.running else None
+        try:
+            for b, idx in zip(self.bindings, self._binding_idx, strict=True):
+                live = idx[~st.stopped[idx]]
+                if live.size == 0:
+                    continue
+                self._timing = clock if b.user_code else None
+                try:
+                    if b.batch:
+                        self._control_batch(b.controller, idx)
+                    else:
+                        for i in live:
+                            self._control_one(b.controller, int(i))
+                except ControllerError as err:
+                    self._controller_failed(err, idx if b.batch else None)
+        finally:
+            self._timing = None
+
+    def _call(self, fn: Any, arg: object) -> Any:
+        """``fn(arg)``, a controller's step, within the time limit when it is timed."""
+        clock = self._timing
+        if clock is None:
+            return fn(arg)
+        clock.begin()
+        try:
+            out = fn(arg)
+        finally:
+            expired = clock.end()
+        if expired:  # the controller caught TimeLimitExceeded and went on
+            raise TimeLimitExceeded(clock.limit_s)
+        return out
 
     def _controller_failed(self, err: ControllerError, idx: np.ndarray | None) -> None:
         """A controller raised or gave a bad command: its robot(s) stop where they are. The
@@ -259,8 +313,10 @@ class Simulation:
     def _control_batch(self, ctrl: BatchController, idx: np.ndarray) -> None:
         obs = self.batch_observation(idx)
         try:
-            cmd = np.asarray(ctrl.step(obs), dtype=np.float64)
-        except Exception as exc:  # noqa: BLE001 - reported with robot names
+            cmd = np.asarray(self._call(ctrl.step, obs), dtype=np.float64)
+        except KeyboardInterrupt:  # Ctrl-C (or SIGTERM) stops the run, not the controller
+            raise
+        except BaseException as exc:  # noqa: BLE001 - user code: SystemExit, the time limit too
             raise ControllerError(",".join(self.robots[i].name for i in idx), obs.t_s, exc) from exc
         self._store_batch(idx, cmd)
 
@@ -291,9 +347,11 @@ class Simulation:
         obs = self.observation(i)
         try:
             step = getattr(ctrl, "step", None)
-            cmd = step(obs) if step is not None else ctrl(obs)  # type: ignore[operator]
+            cmd = self._call(step if step is not None else ctrl, obs)
             self._store_command(i, None, cmd)
-        except Exception as exc:  # noqa: BLE001 - reported with the robot's name
+        except KeyboardInterrupt:  # Ctrl-C (or SIGTERM) stops the run, not the controller
+            raise
+        except BaseException as exc:  # noqa: BLE001 - user code: SystemExit, the time limit too
             raise ControllerError(self.robots[i].name, obs.t_s, exc) from exc
 
     def _store_command(self, i: int, arr: np.ndarray | None, cmd: object) -> None:
