@@ -26,8 +26,8 @@ from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.dynamics.vehicle import check_dynamics
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file
-from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
 from agvsim.scenario_dynamics import dynamics_spec, floor_spec
+from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
 from agvsim.scenario_schema import (
     AvoidConfig,
     CameraConfig,

@@ -28,8 +28,8 @@ from agvsim.fleet.config import LayoutConfig, Vda5050Config
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
-from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
+from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
 from agvsim.sim.spec import ControlMode
 
 
