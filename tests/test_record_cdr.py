@@ -335,3 +335,50 @@ def test_recording_reads_a_cut_file_through_a_repaired_copy(tmp_path):
     (tmp_path / "junk.mcap").write_bytes(b"hello")
     with pytest.raises(RecordingError, match="not an MCAP file"):
         Recording(tmp_path / "junk.mcap")
+
+
+def test_joint_state_bytes_equal_rosbags():
+    t = 1_500_000_000
+    names, pos, vel, eff = ["a/left_wheel", "a/right_wheel"], [0.1, 0.2], [1.0, -2.0], [0.5, 0.3]
+    for effort in (eff, None):
+        ours = R.encode_joint_state(t, names, pos, vel, effort)
+        ref = T["sensor_msgs/msg/JointState"](
+            header=_hdr(t, ""),
+            name=names,
+            position=np.array(pos),
+            velocity=np.array(vel),
+            effort=np.array(effort if effort else [], dtype=np.float64),
+        )
+        assert ours == bytes(TS.serialize_cdr(ref, R.JOINT_STATE))
+    with pytest.raises(ValueError, match="as many"):
+        R.encode_joint_state(t, names, pos, [1.0])
+
+
+@pytest.mark.parametrize("frame", ["a/base_link", "robot_12/base_link"])
+def test_footprint_marker_array_bytes_equal_rosbags(frame):
+    t = 2_000_000_000
+    P, C = T["geometry_msgs/msg/Point"], T["std_msgs/msg/ColorRGBA"]
+    outlines = [
+        (frame, "a", [(0.3, 0.2), (-0.3, 0.2), (-0.3, -0.2), (0.3, -0.2)], (1.0, 0.5, 0.25)),
+        ("bb/base_link", "bb", [(0.5, 0.1), (-0.1, 0.1), (-0.1, -0.1)], (0.0, 0.0, 1.0)),
+    ]
+    empty = np.array([], dtype=np.uint8)
+
+    def marker(i, frame_id, ns, corners, rgb):
+        return T["visualization_msgs/msg/Marker"](
+            header=_hdr(t, frame_id), ns=ns, id=i, type=4, action=0, pose=_pose(0.0, 0.0, 0.0),
+            scale=T["geometry_msgs/msg/Vector3"](x=0.02, y=0.0, z=0.0),
+            color=C(r=rgb[0], g=rgb[1], b=rgb[2], a=1.0),
+            lifetime=T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0), frame_locked=True,
+            points=[P(x=x, y=y, z=0.0) for x, y in [*corners, corners[0]]], colors=[],
+            texture_resource="",
+            texture=T["sensor_msgs/msg/CompressedImage"](header=_hdr(0, ""), format="", data=empty),
+            uv_coordinates=[], text="", mesh_resource="",
+            mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=empty),
+            mesh_use_embedded_materials=False,
+        )  # fmt: skip
+
+    ref = T["visualization_msgs/msg/MarkerArray"](
+        markers=[marker(i, *o) for i, o in enumerate(outlines)]
+    )
+    assert R.encode_footprints(t, outlines) == bytes(TS.serialize_cdr(ref, R.MARKER_ARRAY))

@@ -100,6 +100,8 @@ def recorded(tmp_path_factory):
                 scans=st.scans.copy(),
                 stamps=st.scan_stamp.copy(),
                 states=sim.active_states(),
+                wheel_angles=st.wheel_angles.copy(),
+                wheel_speeds=st.wheel_speeds.copy(),
             )
         )
 
@@ -152,7 +154,42 @@ def test_topics_and_types(recorded):
         "/b_2/front": "sensor_msgs/msg/LaserScan",
         "/a/state": "std_msgs/msg/String",
         "/b_2/state": "std_msgs/msg/String",
+        "/a/joint_states": "sensor_msgs/msg/JointState",
+        "/b_2/joint_states": "sensor_msgs/msg/JointState",
+        "/agvsim/footprints": "visualization_msgs/msg/MarkerArray",
     }
+
+
+def test_joint_states_are_the_wheel_angles_and_speeds(recorded):
+    _, path, snaps = recorded
+    msgs = _read(path)
+    for i, (name, wheels) in enumerate([("a", ["left", "right"]), ("b_2", None)]):
+        joints = msgs[f"/{name}/joint_states"]
+        assert len(joints) == 101
+        for k in (0, 50, 100):
+            m = joints[k][1]
+            n = len(m.name)
+            if wheels is not None:
+                assert list(m.name) == [f"{name}/{w}_wheel" for w in wheels]
+            assert n == len(m.position) == len(m.velocity) and len(m.effort) == 0
+            np.testing.assert_array_equal(m.position, snaps[k]["wheel_angles"][i, :n])
+            np.testing.assert_array_equal(m.velocity, snaps[k]["wheel_speeds"][i, :n])
+    # robot a turns both wheels forward on its constant twist: the angles grow
+    last = msgs["/a/joint_states"][100][1]
+    assert (np.asarray(last.position) > 0).all()
+
+
+def test_footprints_are_the_body_outlines(recorded):
+    sim, path, _ = recorded
+    ((t_ns, m),) = _read(path)["/agvsim/footprints"]
+    assert t_ns == 0 and len(m.markers) == 2
+    for marker, rt, spec in zip(m.markers, ["a", "b_2"], sim.robots, strict=True):
+        assert marker.header.frame_id == f"{rt}/base_link" and marker.type == 4
+        pts = np.array([[p.x, p.y] for p in marker.points])
+        assert len(pts) == 5 and (pts[0] == pts[-1]).all()  # closed
+        hl, hw = spec.footprint_half_m
+        np.testing.assert_allclose(pts[:4].max(axis=0), [spec.body_offset_x_m + hl, hw])
+        np.testing.assert_allclose(pts[:4].min(axis=0), [spec.body_offset_x_m - hl, -hw])
 
 
 def test_poses_twists_and_odometry_equal_the_simulation(recorded):
@@ -630,3 +667,20 @@ def test_camera_info_with_every_image_projects_onto_the_rendered_pixels(tmp_path
     on_wall = (np.minimum(off_x, off_y) < 1e-5) & (p[:, 2] > 0) & (p[:, 2] < WALL_HEIGHT_M)
     assert np.all(on_floor | on_wall)
     assert on_floor.sum() > 200 and on_wall.sum() > 200, (on_floor.sum(), on_wall.sum())
+
+
+def test_foxglove_layout_names_topics_of_the_main_demo(tmp_path):
+    """Every topic the shipped Foxglove layout shows is one that a run of the main demo
+    records."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    layout = json.loads((root / "docs/foxglove/agvsim_layout.json").read_text())
+    panels = layout["configById"]
+    wanted = set(panels["3D!agvsim"]["topics"])
+    wanted |= {p["value"].split(".")[0] for p in panels["Plot!wheels"]["paths"]}
+    wanted |= {c["topicPath"].split(".")[0] for k, c in panels.items() if "RawMessages" in k}
+    run_scenario(root / "scenarios/thesis_maze_avoid.yaml", tmp_path, duration_s=0.2, plot=False)
+    with AnyReader([tmp_path / "run.mcap"]) as r:
+        topics = {c.topic for c in r.connections}
+    assert wanted <= topics, wanted - topics

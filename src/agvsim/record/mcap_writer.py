@@ -21,6 +21,11 @@ topic                           type                         when
 /<robot>/odom                   nav_msgs/Odometry            pose rate (<robot>/odom frame)
 /<robot>/<sensor>               sensor_msgs/LaserScan        each time the sensor fires
 /<robot>/state                  std_msgs/String              when the controller state changes
+/<robot>/joint_states           sensor_msgs/JointState       pose rate: each wheel (accumulated
+                                                             angle, speed, torque with dynamics)
+                                                             and steered wheel (angle, rate)
+/agvsim/footprints              visualization_msgs/          once: each robot's body outline in
+                                MarkerArray                  its base_link frame
 /<robot>/<camera>/image/...     sensor_msgs/CompressedImage  every camera frame (JPEG)
 /<robot>/<camera>/camera_info   sensor_msgs/CameraInfo       with every frame (its intrinsics K)
 /<robot>/slam/map               nav_msgs/OccupancyGrid       ``write_slam_map`` (online SLAM)
@@ -138,6 +143,14 @@ class Recorder:
         for rt in self.robot_topics:
             pairs += [("map", f"{rt}/odom"), (f"{rt}/odom", f"{rt}/base_link")]
         self._tf = msg.TfEncoder(pairs)
+        self._joint_channels = [self._channel(f"/{rt}/joint_states", msg.JOINT_STATE)
+                                for rt in self.robot_topics]  # fmt: skip
+        self._joint_names = [
+            [f"{rt}/{w}_wheel" for w in r.model.wheel_names]
+            + [f"{rt}/{r.model.wheel_names[k]}_steer" for k in r.model.steered_wheels]
+            for rt, r in zip(self.robot_topics, sim.robots, strict=True)
+        ]
+        self._prev_steer: tuple[float, np.ndarray] | None = None
         self._tf_channel = self._channel("/tf", msg.TF_MESSAGE)
         frames = sim_frames(sim)
         self._camera_seq = {f.slot: 0 for f in frames}
@@ -169,6 +182,7 @@ class Recorder:
         if scenario_yaml is not None:
             self._write("/agvsim/scenario", msg.STRING, t_ns, msg.encode_string(scenario_yaml))
         self._write_tf_static(t_ns)
+        self._write_footprints(t_ns)
         self.record()
         self.writer.flush()
 
@@ -210,6 +224,44 @@ class Recorder:
         if tfs:
             self._write("/tf_static", msg.TF_MESSAGE, t_ns, msg.encode_tf_3d(t_ns, tfs))
 
+    def _write_footprints(self, t_ns: int) -> None:
+        """Each robot's rectangular body outline in its ``base_link`` frame (reference point
+        P at the origin, the body centre ``body_offset_x_m`` ahead), in the robot's colour."""
+        from matplotlib.colors import to_rgb  # colours are checked when the scenario loads
+
+        markers = []
+        for rt, r in zip(self.robot_topics, self.sim.robots, strict=True):
+            hl, hw = r.footprint_half_m
+            x0 = r.body_offset_x_m
+            corners = [(x0 + hl, hw), (x0 - hl, hw), (x0 - hl, -hw), (x0 + hl, -hw)]
+            markers.append((f"{rt}/base_link", rt, corners, to_rgb(r.color)))
+        if markers:
+            self._write("/agvsim/footprints", msg.MARKER_ARRAY, t_ns,
+                        msg.encode_footprints(t_ns, markers))  # fmt: skip
+
+    def _write_joints(self, t_s: float, t_ns: int) -> None:
+        st = self.sim.state
+        steer = st.steer_angles
+        if self._prev_steer is None or t_s <= self._prev_steer[0]:
+            steer_rate = np.zeros_like(steer)
+        else:
+            steer_rate = (steer - self._prev_steer[1]) / (t_s - self._prev_steer[0])
+        self._prev_steer = (t_s, steer.copy())
+        torque = st.wheel_torque_nm
+        for i, r in enumerate(self.sim.robots):
+            w, k = len(r.model.wheel_names), len(r.model.steered_wheels)
+            effort = None
+            if r.dynamics is not None and torque.shape[0] == self.sim.n:
+                effort = torque[i, :w].tolist() + [0.0] * k
+            data = msg.encode_joint_state(
+                t_ns,
+                self._joint_names[i],
+                st.wheel_angles[i, :w].tolist() + steer[i, :k].tolist(),
+                st.wheel_speeds[i, :w].tolist() + steer_rate[i, :k].tolist(),
+                effort,
+            )
+            self.writer.add_message(self._joint_channels[i], t_ns, data)
+
     # ------------------------------------------------------------------ every step
     def record(self) -> None:
         """Write what is due at the simulation's current time."""
@@ -225,6 +277,7 @@ class Recorder:
                                  g.origin_xy_m, trinary=True)  # fmt: skip
         if t_s >= self._next_pose_s - 1e-9:
             self._write_poses(t_s, t_ns)
+            self._write_joints(t_s, t_ns)
             self._next_pose_s = t_s + self.pose_period_s
         self._write_scans(t_ns)
         if self._camera_seq:

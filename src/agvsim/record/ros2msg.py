@@ -62,6 +62,25 @@ _DEFS: dict[str, str] = {
         "float64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\n"
         "uint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"
     ),
+    "sensor_msgs/JointState": (
+        "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
+        "float64[] effort\n"
+    ),
+    "std_msgs/ColorRGBA": "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n",
+    "builtin_interfaces/Duration": "int32 sec\nuint32 nanosec\n",
+    "visualization_msgs/UVCoordinate": "float32 u\nfloat32 v\n",
+    "visualization_msgs/MeshFile": "string filename\nuint8[] data\n",
+    # the layout of rosbags' ROS 2 Humble store (texture and mesh_file fields included)
+    "visualization_msgs/Marker": (
+        "std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\n"
+        "geometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\n"
+        "builtin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\n"
+        "std_msgs/ColorRGBA[] colors\nstring texture_resource\n"
+        "sensor_msgs/CompressedImage texture\n"
+        "visualization_msgs/UVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\n"
+        "visualization_msgs/MeshFile mesh_file\nbool mesh_use_embedded_materials\n"
+    ),
+    "visualization_msgs/MarkerArray": "visualization_msgs/Marker[] markers\n",
 }
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -71,7 +90,19 @@ OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 STRING = "std_msgs/msg/String"
-TYPES = (TF_MESSAGE, ODOMETRY, LASER_SCAN, OCCUPANCY_GRID, COMPRESSED_IMAGE, CAMERA_INFO, STRING)
+JOINT_STATE = "sensor_msgs/msg/JointState"
+MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
+TYPES = (
+    TF_MESSAGE,
+    ODOMETRY,
+    LASER_SCAN,
+    OCCUPANCY_GRID,
+    COMPRESSED_IMAGE,
+    CAMERA_INFO,
+    STRING,
+    JOINT_STATE,
+    MARKER_ARRAY,
+)
 
 _SEP = "=" * 80 + "\n"
 _BAD = re.compile(r"[^A-Za-z0-9_]")
@@ -317,6 +348,73 @@ def encode_camera_info(
     for v in (0, 0, 0, 0, 0, 0):  # binning_x, binning_y, roi x_offset, y_offset, height, width
         c.u32(v)
     c.buf += b"\x00"  # roi.do_rectify = false
+    return c.bytes()
+
+
+def encode_joint_state(
+    t_ns: int,
+    names: list[str],
+    position: list[float],
+    velocity: list[float],
+    effort: list[float] | None = None,
+) -> bytes:
+    """``sensor_msgs/JointState`` with an empty frame (joint states name their joints);
+    ``effort`` empty when ``None`` (the joints' torques are not known)."""
+    n = len(names)
+    if len(position) != n or len(velocity) != n or (effort is not None and len(effort) != n):
+        raise ValueError(f"JointState: {n} names need as many positions, velocities, efforts")
+    c = Cdr()
+    c.header(t_ns, "")
+    c.u32(n)
+    for name in names:
+        c.string(name)
+    for values in (position, velocity, effort or []):
+        c.seq(struct.pack(f"<{len(values)}d", *values), len(values), 8)
+    return c.bytes()
+
+
+LINE_STRIP = 4  # visualization_msgs/Marker.type
+
+
+def encode_footprints(
+    t_ns: int,
+    markers: list[tuple[str, str, list[tuple[float, float]], tuple[float, float, float]]],
+    line_width_m: float = 0.02,
+) -> bytes:
+    """``visualization_msgs/MarkerArray`` of closed ``LINE_STRIP`` outlines, one per
+    ``(frame_id, ns, corners_xy_m, rgb)``: the corners in that frame (z = 0), the strip closed
+    back to its first corner, opaque, frame-locked and without a lifetime (shown until
+    replaced)."""
+    c = Cdr()
+    c.u32(len(markers))
+    for marker_id, (frame_id, ns, corners, rgb) in enumerate(markers):
+        c.header(t_ns, frame_id)
+        c.string(ns)
+        c.u32(marker_id)  # int32 id (non-negative here)
+        c.u32(LINE_STRIP)
+        c.u32(0)  # action ADD
+        c.f64(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # pose: identity
+        c.f64(line_width_m, 0.0, 0.0)  # scale.x: the line width
+        c.f32(*rgb, 1.0)
+        c.stamp(0)  # lifetime 0: forever
+        c.buf += b"\x01"  # frame_locked
+        closed = [*corners, corners[0]] if corners else []
+        c.u32(len(closed))
+        if closed:
+            c.align(8)
+            for x, y in closed:
+                c.buf += struct.pack("<3d", x, y, 0.0)
+        c.u32(0)  # colors
+        c.string("")  # texture_resource
+        c.header(0, "")  # texture: CompressedImage with an empty header, format and data
+        c.string("")
+        c.u32(0)
+        c.u32(0)  # uv_coordinates
+        c.string("")  # text
+        c.string("")  # mesh_resource
+        c.string("")  # mesh_file.filename
+        c.u32(0)  # mesh_file.data
+        c.buf += b"\x00"  # mesh_use_embedded_materials
     return c.bytes()
 
 
