@@ -93,7 +93,7 @@ def there_and_back(scans: Iterable[ScanRecord], passes: int) -> Iterator[ScanRec
 
 
 def run_case(
-    root: Path, log: str, fault: str, seed: int, passes: int = 1
+    root: Path, log: str, fault: str, seed: int, passes: int = 1, maps: Path | None = None
 ) -> dict[str, float | int | str]:
     """One (log, fault) case; returns its figures (runs in a worker process). ``log`` is a
     data set name of :data:`LOGS` or the path of a simulated ``run.mcap``."""
@@ -143,6 +143,11 @@ def run_case(
         out["odom_m"] = _odometry_error(np.asarray(stamps), np.asarray(odoms), rel)
     else:
         out["consistency"] = map_consistency(slam)
+    if maps is not None:
+        from agvsim.slam.mapping import save_map_png
+
+        maps.mkdir(parents=True, exist_ok=True)
+        save_map_png(slam.occupancy_map(), maps / f"{path.name.split('.')[0]}-{fault}.png")
     out["peak_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return out
 
@@ -188,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         default=1,
         help="drive each log this many times, forward and back (a long log, for memory)",
     )
+    ap.add_argument("--maps", type=Path, default=None, help="write each case's map.png here")
     args = ap.parse_args(argv)
     root = datasets_dir()
     if root is None:
@@ -202,7 +208,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     base: dict[str, float] = {}
     with ProcessPoolExecutor(max_workers=args.jobs, max_tasks_per_child=1) as pool:
-        futures = [pool.submit(run_case, root, log, f, args.seed, args.passes) for log, f in cases]
+        futures = [
+            pool.submit(run_case, root, log, f, args.seed, args.passes, args.maps)
+            for log, f in cases
+        ]
         for fut in futures:
             r = fut.result()
             log = str(r["log"])
