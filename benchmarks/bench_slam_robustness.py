@@ -5,9 +5,12 @@ Run ``python benchmarks/bench_slam_robustness.py [--logs aces intel mit-killian]
 [--faults none freeze ...] [--jobs N] [--seed S]``. Each (log, fault) case runs in its own
 process (one numba thread; ``--jobs`` cases at a time, 1 by default) and prints
 
-* scans and keyframes processed, loop-closure edges, wall seconds and the real-time factor;
+* scans and keyframes processed, loop-closure edges, CPU and wall seconds and the real-time
+  factor on CPU time (log duration / CPU seconds: a busy machine stretches wall time);
 * the mean translational error (m) of SLAM and of the faulty odometry alone on the relations
-  whose two scans survived the fault (Kümmerle et al.), and their count;
+  whose two scans survived the fault (Kümmerle et al.), and their count; a simulated
+  recording (``--mcap run.mcap``, from ``agvsim run``) is scored on relations drawn from its
+  ground truth (every 5th scan with the scan 10 later and with a random one);
 * SLAM's error over the unperturbed SLAM error of the same log (target <= 1.5) and over
   odometry's (target < 1);
 * the process's peak resident memory (MiB).
@@ -25,6 +28,7 @@ import os
 import resource
 import sys
 import time
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -32,7 +36,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from agvsim.slam.carmen import CarmenLog  # noqa: E402
+from agvsim.slam.carmen import ScanRecord  # noqa: E402
 from agvsim.slam.datasets import datasets_dir  # noqa: E402
 from agvsim.slam.evaluate import (  # noqa: E402
     Relations,
@@ -54,22 +58,67 @@ def _odometry_error(stamps: np.ndarray, odom: np.ndarray, rel: Relations) -> flo
     return evaluate_relations(Trajectory(stamps, odom), rel).translation_mean_m
 
 
-def run_case(root: Path, log: str, fault: str, seed: int) -> dict[str, float | int | str]:
-    """One (log, fault) case; returns its figures (runs in a worker process)."""
-    path, rel_path = LOGS[log]
+def truth_relations(path: Path, seed: int = 0) -> Relations:
+    """Relations of a simulated recording from its ground truth, Kümmerle-style: every 5th
+    scan paired with the scan 10 later (short) and with a random scan (long, loop-closing)."""
+    from agvsim.record.mcap_reader import Recording
+    from agvsim.record.ros2msg import topic_name
+    from agvsim.slam.recording import McapScanLog, interpolate_poses
+    from agvsim.slam.se2 import between
+
+    log = McapScanLog(path)
+    t_gt, gt, _ = Recording(path).odometry(f"/{topic_name(log.robot)}/ground_truth")
+    t = log.scans.t_s
+    truth = interpolate_poses(t, t_gt, gt)
+    i = np.arange(0, len(t) - 10, 5)
+    j = np.concatenate([i + 10, np.random.default_rng(seed).integers(0, len(t), len(i))])
+    i = np.concatenate([i, i])
+    return Relations(t[i], t[j], between(truth[i], truth[j]))
+
+
+def there_and_back(scans: Iterable[ScanRecord], passes: int) -> Iterator[ScanRecord]:
+    """The log driven ``passes`` times: forward, backward (the scans in reverse order, time
+    mirrored), forward, ... A long log from a short one, for memory (the scans are held)."""
+    from dataclasses import replace
+
+    first = list(scans)
+    yield from first
+    t0, t1 = first[0].timestamp_s, first[-1].timestamp_s
+    span = t1 - t0 + 0.1
+    for k in range(1, passes):
+        order = first[::-1] if k % 2 else first
+        for rec in order:
+            t = (t1 + (t1 - rec.timestamp_s)) if k % 2 else rec.timestamp_s
+            yield replace(rec, timestamp_s=t + (k - (k % 2)) * span + (0.1 if k % 2 else 0.0))
+
+
+def run_case(
+    root: Path, log: str, fault: str, seed: int, passes: int = 1, maps: Path | None = None
+) -> dict[str, float | int | str]:
+    """One (log, fault) case; returns its figures (runs in a worker process). ``log`` is a
+    data set name of :data:`LOGS` or the path of a simulated ``run.mcap``."""
+    from agvsim.slam.offline import open_log
+
+    if log.endswith(".mcap"):
+        path, rel_path = Path(log), None
+    else:
+        path, rel_path = root / LOGS[log][0], LOGS[log][1]
     rng = np.random.default_rng(seed)
     stamps: list[float] = []
     odoms: list[np.ndarray] = []
 
-    def tap(scans: CarmenLog):  # type: ignore[no-untyped-def]
+    def tap(scans: Iterable[ScanRecord]) -> Iterator[ScanRecord]:
         for rec in apply_fault(scans, fault, rng):
             stamps.append(rec.timestamp_s)
             odoms.append(rec.odom_pose)
             yield rec
 
-    t0 = time.perf_counter()
-    slam = map_scans(tap(CarmenLog(root / path)))
-    wall = time.perf_counter() - t0
+    t0, c0 = time.perf_counter(), time.process_time()
+    source: Iterable[ScanRecord] = open_log(path)
+    if passes > 1:
+        source = there_and_back(source, passes)
+    slam = map_scans(tap(source))
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     assert slam is not None
     t, poses = slam.trajectory()
     out: dict[str, float | int | str] = {
@@ -79,16 +128,26 @@ def run_case(root: Path, log: str, fault: str, seed: int) -> dict[str, float | i
         "keyframes": len(slam.keyframes),
         "loops": len(slam.loop_edges),
         "wall_s": wall,
-        "rt": float(t[-1] - t[0]) / wall,
+        "rt": float(t[-1] - t[0]) / cpu,
+        "cpu_s": cpu,
     }
+    rel = None
     if rel_path is not None:
         rel = load_relations(root / rel_path)
+    elif path.suffix == ".mcap":
+        rel = truth_relations(path)
+    if rel is not None:
         err = evaluate_relations(Trajectory(t, poses), rel)
         out["slam_m"] = err.translation_mean_m
         out["relations"] = err.count
         out["odom_m"] = _odometry_error(np.asarray(stamps), np.asarray(odoms), rel)
     else:
         out["consistency"] = map_consistency(slam)
+    if maps is not None:
+        from agvsim.slam.mapping import save_map_png
+
+        maps.mkdir(parents=True, exist_ok=True)
+        save_map_png(slam.occupancy_map(), maps / f"{path.name.split('.')[0]}-{fault}.png")
     out["peak_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return out
 
@@ -118,26 +177,46 @@ def map_consistency(slam) -> float:  # type: ignore[no-untyped-def]
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--logs", nargs="*", default=["aces", "intel"], choices=list(LOGS))
+    ap.add_argument(
+        "--mcap",
+        nargs="*",
+        default=[],
+        type=Path,
+        help="simulated recordings (agvsim run ... run.mcap), scored on their ground truth",
+    )
     ap.add_argument("--faults", nargs="*", default=[f.value for f in Fault], choices=list(Fault))
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument(
+        "--passes",
+        type=int,
+        default=1,
+        help="drive each log this many times, forward and back (a long log, for memory)",
+    )
+    ap.add_argument("--maps", type=Path, default=None, help="write each case's map.png here")
     args = ap.parse_args(argv)
     root = datasets_dir()
     if root is None:
         print("robustness suite skipped: no data sets folder (set AGVSIM_DATASETS)")
         return 0
-    cases = [(log, f) for log in args.logs for f in args.faults]
+    logs = list(args.logs) + [str(p.resolve()) for p in args.mcap]
+    cases = [(log, f) for log in logs for f in args.faults]
     print(
-        f"{'log':<12}{'fault':<13}{'scans':>6}{'kf':>6}{'loops':>6}{'SLAM m':>9}{'odom m':>9}"
-        f"{'/base':>7}{'/odom':>7}{'rel':>6}{'RTx':>7}{'wall s':>8}{'MiB':>7}",
+        f"{'log':<16}{'fault':<13}{'scans':>6}{'kf':>6}{'loops':>6}{'SLAM m':>9}{'odom m':>9}"
+        f"{'/base':>7}{'/odom':>7}{'rel':>6}{'RTx':>7}{'CPU s':>8}{'wall s':>8}{'MiB':>7}",
         flush=True,
     )
     base: dict[str, float] = {}
     with ProcessPoolExecutor(max_workers=args.jobs, max_tasks_per_child=1) as pool:
-        futures = [pool.submit(run_case, root, log, f, args.seed) for log, f in cases]
+        futures = [
+            pool.submit(run_case, root, log, f, args.seed, args.passes, args.maps)
+            for log, f in cases
+        ]
         for fut in futures:
             r = fut.result()
             log = str(r["log"])
+            if log.endswith(".mcap"):
+                log = "sim:" + Path(log).parent.name
             if "slam_m" in r:
                 slam_m, odom_m = float(r["slam_m"]), float(r["odom_m"])
                 if r["fault"] == "none":
@@ -150,8 +229,9 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 score = f"{'consistency ' + format(float(r['consistency']), '.3f'):>38}"
             print(
-                f"{log:<12}{str(r['fault']):<13}{int(r['scans']):>6d}{int(r['keyframes']):>6d}"
-                f"{int(r['loops']):>6d}{score}{float(r['rt']):>7.1f}{float(r['wall_s']):>8.1f}"
+                f"{log:<16}{str(r['fault']):<13}{int(r['scans']):>6d}{int(r['keyframes']):>6d}"
+                f"{int(r['loops']):>6d}{score}{float(r['rt']):>7.1f}{float(r['cpu_s']):>8.1f}"
+                f"{float(r['wall_s']):>8.1f}"
                 f"{float(r['peak_mib']):>7.0f}",
                 flush=True,
             )

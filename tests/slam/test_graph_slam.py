@@ -279,3 +279,16 @@ def test_finished_submap_keeps_only_its_occupied_cells() -> None:
     assert sub.occupied_cells.nbytes < expected.nbytes / 20  # walls, not area (1.7 %)
     np.testing.assert_array_equal(sub.field(), expected)
     assert sub.ox == pytest.approx(live.ox) and sub.field().shape == expected.shape
+
+
+def test_pyramid_cache_stays_within_its_budget() -> None:
+    sub, _ = finished_submap(np.array([[1.5 + 0.2 * k, 1.5, 0.0] for k in range(20)]))
+    one = LoopDetector(LoopConfig(), 0.05)._pyramid(sub).nbytes
+    budget_mib = 2.5 * one / 2**20  # room for two pyramids of this size
+    det = LoopDetector(LoopConfig(pyramid_cache_mib=budget_mib), 0.05)
+    for index in range(6):
+        sub.index = index  # six submaps of the same size
+        det._pyramid(sub)
+        assert det._cached_bytes <= budget_mib * 2**20
+    assert list(det._pyramids) == [4, 5]  # the least recently used went first
+    np.testing.assert_array_equal(det._pyramid(sub)[0], sub.field())  # level 0 is the field

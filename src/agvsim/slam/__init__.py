@@ -13,12 +13,20 @@ from agvsim.slam.evaluate import (
     load_trajectory,
 )
 from agvsim.slam.g2o import G2OFormatError, load_g2o, save_g2o
-from agvsim.slam.posegraph import OptimizeResult, PoseGraph, RobustKernel, chi2, optimize
+from agvsim.slam.posegraph import (
+    Initialisation,
+    OptimizeResult,
+    PoseGraph,
+    RobustKernel,
+    chi2,
+    optimize,
+)
 from agvsim.slam.se2 import between, compose, inverse, wrap_angle
 
 __all__ = [
     # back end
     "G2OFormatError",
+    "Initialisation",
     "OptimizeResult",
     "PoseGraph",
     "RelationErrors",

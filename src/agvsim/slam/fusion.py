@@ -1,0 +1,162 @@
+"""Fusion of scan matches with wheel odometry, by their noises learnt on the fly
+(:class:`OdometryFusion`; used by :class:`~.frontend.Tracker`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agvsim.slam.se2 import between
+
+__all__ = ["OdometryFusion"]
+
+F64 = NDArray[np.float64]
+
+
+class OdometryFusion:
+    """Weighs each scan match against the odometry prediction by their noises, estimated on
+    the fly (no noise model of the robot needed).
+
+    A match ``m_k`` is placed against the submap, so its error does not build up from scan to
+    scan; odometry's does, as a random walk. Over the last ``window`` scans, the spread of the
+    difference between the match's and odometry's increments is therefore
+    ``v_1 = 2 s_m^2 + s_o^2`` for consecutive scans and ``v_L = 2 s_m^2 + L s_o^2`` over ``L``
+    scans (robust spreads, separately for translation and heading), which gives the odometry's
+    per-scan variance ``s_o^2`` and the match's ``s_m^2``. The pose kept is the prediction
+    moved towards the match by the gain ``s_o^2 / (s_o^2 + s_m^2)``. That is deliberately
+    more trusting of odometry than the steady-state Kalman gain for white match noise (about
+    ``sqrt(s_o^2 / s_m^2)``): errors of matches against one submap are correlated from scan to
+    scan, and the thesis maze's map IoU fell from 0.97 to 0.89 with the Kalman gain (mean of
+    four recorded runs). For translation ``s_m^2`` is scaled per direction by how sharply the
+    match is constrained there (the eigenvalues of its ``J^T J``, against their typical value),
+    so along a corridor odometry carries the pose.
+    A robot with good wheel odometry keeps it; one whose odometry slips follows its scans.
+
+    Until it is :meth:`ready`, the pose is odometry's alone (and :class:`~.graph_slam.GraphSlam`
+    processes those first scans again with the learnt noises, :meth:`preset`)."""
+
+    def __init__(
+        self, window: int, lag: int, floors: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ) -> None:
+        self.window, self.lag = window, lag
+        self.floors = floors  # std: m per m, rad per rad, rad per m (TrackingConfig.odom_floor_*)
+        self._preset = False
+        self.matches: list[F64] = []
+        self.odoms: list[F64] = []
+        self.sharp: list[float] = []
+        self._k = (1.0, 1.0, 1.0, 1.0)  # see estimate()
+        self._count = 0
+        self._raw: F64 | None = None
+        self._last_odom: F64 | None = None
+
+    def floor_variance(self, step: F64) -> tuple[float, float]:
+        """Odometry's least per-scan variance (translation, heading) for an odometry
+        increment ``step`` (3,): its physics, not what the run showed (:class:`TrackingConfig`
+        ``odom_floor_*``). Regular motion between sparse scans can make the learnt spread
+        vanish; scans must still correct odometry in proportion to how far it drove."""
+        dist, turn = math.hypot(step[0], step[1]), abs(_wrap(step[2]))
+        f_m, f_rr, f_rm = self.floors
+        return (f_m * dist) ** 2, (f_rr * turn + f_rm * dist) ** 2
+
+    def match_variance(self) -> tuple[float, float] | None:
+        """The matches' per-scan variance (translation, heading), None until learnt."""
+        if not (self._preset or self.ready()):
+            return None
+        s_o, s_m, k_rot, s_or = self._k
+        return s_m, s_or * (1.0 - k_rot) / max(k_rot, 1e-12)
+
+    def fuse(self, guess: F64, match: F64, hessian: F64, step: F64 | None = None) -> F64:
+        """The fused pose; records ``match`` (call :meth:`add` with the odometry after).
+        ``step`` is the odometry increment behind ``guess`` (for the noise floors)."""
+        self._raw = np.asarray(match, np.float64).copy()
+        w, v = np.linalg.eigh(hessian[:2, :2])
+        w = np.maximum(w, 0.0)
+        self.sharp.append(float(math.sqrt(w[0] * w[1])))
+        if not self.ready() and not self._preset:
+            # learning the noises: odometry alone builds the map, so that the matches against
+            # it show odometry's drift (GraphSlam then processes these scans again)
+            return guess.copy()
+        if self.ready() and self._count % 10 == 0:
+            self._k = self.estimate()
+        s_o, s_m, k_rot, s_or = self._k
+        if step is not None:
+            f_t, f_r = self.floor_variance(step)
+            if f_t > s_o:
+                s_o = f_t
+            if f_r > s_or:
+                s_mr = s_or * (1.0 - k_rot) / max(k_rot, 1e-12)
+                k_rot = f_r / (f_r + s_mr)
+        ref = float(np.median(self.sharp))
+        d = v.T @ (match[:2] - guess[:2])
+        d *= s_o / (s_o + s_m * ref / np.maximum(w, 1e-9 * ref + 1e-12))
+        out = guess.copy()
+        out[:2] = guess[:2] + v @ d
+        out[2] = guess[2] + k_rot * _wrap(match[2] - guess[2])
+        return out
+
+    def ready(self) -> bool:
+        """Enough scans taken on the move to estimate the noises."""
+        return len(self.matches) >= self.lag + 30
+
+    def preset(self, k: tuple[float, float, float, float]) -> None:
+        """Start from noises learnt earlier (see :meth:`estimate`) until enough scans come."""
+        self._k, self._preset = k, True
+
+    def odometry_variance(self) -> tuple[float, float] | None:
+        if not (self._preset or self.ready()):
+            return None
+        return self._k[0], self._k[3]
+
+    def add(self, odom: F64) -> None:
+        """Record the scan's odometry beside its raw match (scans without a match, and scans
+        taken standing still, are left out)."""
+        last, self._last_odom = self._last_odom, odom.copy()
+        if self._raw is None:
+            return
+        if last is not None:
+            step = between(last, odom)
+            if math.hypot(step[0], step[1]) < 1e-3 and abs(step[2]) < 1e-3:
+                self._raw = None  # standing still: odometry has nothing to drift by
+                return
+        self.matches.append(self._raw)
+        self.odoms.append(odom.copy())
+        self._raw = None
+        self._count += 1
+        keep = self.window + self.lag + 1
+        if len(self.odoms) > keep:
+            del self.odoms[0]
+        if len(self.matches) > keep:
+            del self.matches[0]
+        if len(self.sharp) > self.window:
+            del self.sharp[0]
+
+    def estimate(self) -> tuple[float, float, float, float]:
+        """``(odometry translation var, match translation var, heading gain, odometry heading
+        var)`` per scan, from the scans so far."""
+        n = min(len(self.matches), len(self.odoms))
+        m = np.asarray(self.matches[-n:])
+        o = np.asarray(self.odoms[-n:])
+        lag = min(self.lag, max((n - 1) // 3, 2))
+        v1 = _spread(m, o, 1)
+        vl = _spread(m, o, lag)
+        out = []
+        for a, b in zip(v1, vl, strict=True):
+            s_o = max(b - a, 0.0) / (lag - 1)
+            s_m = max(a - s_o, 1e-12) / 2.0
+            out.append((s_o, s_m))
+        (so_t, sm_t), (so_r, sm_r) = out
+        return so_t, sm_t, so_r / (so_r + sm_r), so_r
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _spread(m: F64, o: F64, lag: int) -> tuple[float, float]:
+    """Robust variances (translation per axis, heading) of the difference between the
+    increments of ``m`` and ``o`` over ``lag`` samples."""
+    e = between(between(o[:-lag], o[lag:]), between(m[:-lag], m[lag:]))
+    mad = 1.4826 * np.median(np.abs(e), axis=0)
+    return float(np.mean(mad[:2] ** 2)), float(mad[2] ** 2)
