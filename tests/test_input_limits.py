@@ -126,6 +126,21 @@ def test_random_maze_cells():
         parse_scenario(data, limits=Limits(max_grid_cells=69))
 
 
+def test_maze_functions_check_their_inputs():
+    from agvsim.world import mazes
+
+    with pytest.raises(ValueError, match=r"7 x 10 = 70 cells is over the limit .* = 69"):
+        mazes.random_maze(2, 3, 1, max_cells=69)
+    assert mazes.random_maze(2, 3, 1, max_cells=70).occupied.shape == (7, 10)
+    for bad in (float("nan"), float("inf"), 0.0, -1.0, "1"):
+        with pytest.raises(ValueError, match="resolution_m must be"):
+            mazes.random_maze(2, 3, 1, resolution_m=bad)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="resolution_m must be"):
+            mazes.thesis_maze("thesis_c1", bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="loop_fraction"):
+        mazes.random_maze(2, 3, 1, loop_fraction=float("nan"))
+
+
 def test_sensor_rates():
     # a 320 x 240 camera at 10 Hz: 768,000 pixels/s; rangers 4 beams x 50 Hz (every step of
     # 0.02 s) + a 240-beam lidar at 10 Hz: 200 + 2,400 = 2,600 rays/s

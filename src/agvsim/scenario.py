@@ -173,6 +173,7 @@ def build_grid(cfg: WorldConfig, base_dir: Path, limits: Limits | None = None) -
             wall_cells=r.wall_cells,
             resolution_m=res,
             loop_fraction=r.loop_fraction,
+            max_cells=limits.max_grid_cells,
         )
     else:
         path = Path(cfg.file or "")
