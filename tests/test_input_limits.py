@@ -290,3 +290,42 @@ def test_trajectory_writer_refuses_a_zero_period(tmp_path):
     for every in (0, -3, 1.5):
         with pytest.raises(ValueError, match="record_every"):
             TrajectoryWriter(tmp_path / "t.csv", sim, every)  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------------------------- behaviours
+def _refused(data: dict) -> str:
+    with pytest.raises(ScenarioError) as info:
+        build(parse_scenario(data))
+    return "\n".join(info.value.problems)
+
+
+def test_goals_that_cannot_be_reached_are_refused():
+    data = _scenario()
+    robot = data["robots"][0]
+    robot["controller"] = {"type": "maze_solver", "goal_cell": [20, 3]}  # the map has rows 0..19
+    assert "goal_cell: [20, 3] is outside the 20 x 20 map (allowed: rows 0..19" in _refused(data)
+    robot["controller"] = {"type": "maze_solver", "method": "tremaux", "goal_cell": [3, 20]}
+    assert "goal_cell: [3, 20] is outside the 20 x 20 map" in _refused(data)
+    robot["controller"] = {"type": "maze_solver", "goal_x_m": 10.0, "goal_y_m": 0.0}
+    assert "(10, 0) is outside the map, which spans x in [-10, 10)" in _refused(data)
+    robot["sensors"] = [{"type": "camera", "width_px": 16, "height_px": 12}]
+    robot["controller"] = {"type": "marker_search", "marker_id": 50}  # 4x4_50: ids 0..49
+    assert "marker_id: 50 is not in 4x4_50, which holds ids 0..49" in _refused(data)
+    robot["controller"] = {"type": "marker_search", "marker_id": 29, "dictionary": "apriltag_16h5"}
+    build(parse_scenario(data))  # 16h5 holds 30 tags: 29 is the last
+
+
+def test_planning_and_slam_rasters_are_bounded():
+    # 100 m cells: A* would rasterise the 20 x 20 maze at 5 cm, 40,000 x 40,000 cells
+    data = _scenario(world={"maze": "thesis_c1", "cell_size_m": 100.0})
+    data["robots"][0]["pose"] = {"x_m": -800.0, "y_m": 500.0}
+    data["robots"][0]["controller"] = {"type": "maze_solver", "goal_cell": [17, 17]}
+    assert "40,000 x 40,000 = 1,600,000,000 cells of 5 cm" in _refused(data)
+    # SLAM: a 1000 m lidar at 6 mm cells rasterises 2 x 1000 / 0.006 = 333,334 cells a side
+    data = _scenario()
+    data["robots"][0]["sensors"] = [{"type": "lidar", "range_max_m": 1000.0}]
+    data["robots"][0]["slam"] = {"resolution_m": 0.006}
+    with pytest.raises(ScenarioError, match=r"robots\[0\]\.slam: .* 333,334 x 333,334 cells"):
+        parse_scenario(data)
+    data["robots"][0]["slam"]["max_range_m"] = 15.0  # 5,000 x 5,000: exactly the default limit
+    parse_scenario(data)
