@@ -242,12 +242,13 @@ def mutated_scenarios(draw: st.DrawFn) -> dict:
             parent[key] = round(value) if type(parent[key]) is int else value
             continue
         key = path[-1]
+        value = copy.deepcopy(draw(values))  # NASTY holds lists: never share (and mutate) them
         if action == "delete":
             del parent[key]
         elif action == "add" and isinstance(parent, dict):
-            parent[draw(st.sampled_from(["typo_key", "limits", "seed", "name"]))] = draw(values)
+            parent[draw(st.sampled_from(["typo_key", "limits", "seed", "name"]))] = value
         else:
-            parent[key] = draw(values)
+            parent[key] = value
     return data
 
 
