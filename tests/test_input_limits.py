@@ -199,6 +199,10 @@ def test_huge_finite_numbers_are_refused():
         "robots[0].controller.goto_goal.goal_x_m: too large (allowed: magnitude <= 1e+12) "
         "(got 10000000000000.0)",
     ]
+    data["robots"][0]["params"] = {"wheel_radius_m": 10**400}  # no float holds it
+    with pytest.raises(ScenarioError, match=r"params: wheel_radius_m: too large"):
+        parse_scenario(data)
+    del data["robots"][0]["params"]
     data["robots"][0]["controller"]["goal_x_m"] = 1e12  # the bound itself is allowed
     data["robots"][0]["sensors"][0]["angle_min_deg"] = -45.0
     assert parse_scenario(data).robots[0].controller.goal_x_m == 1e12

@@ -209,7 +209,7 @@ def _model(rc: RobotConfig, where: str) -> Any:
         numeric = isinstance(default, int | float | np.floating)
         if numeric and (isinstance(v, str | bool) or not isinstance(v, int | float)):
             raise ScenarioError("", [f"{where}.params.{k}: must be a number, got {v!r}"])
-        if numeric and not (math.isfinite(v) and abs(v) <= 1e12):
+        if numeric and not (abs(v) <= 1e12 and math.isfinite(v)):  # abs first: a huge int
             raise ScenarioError(
                 "", [f"{where}.params.{k}: {v!r} is not allowed (a finite number, |x| <= 1e12)"]
             )
