@@ -333,3 +333,9 @@ def test_planning_and_slam_rasters_are_bounded():
         parse_scenario(data)
     data["robots"][0]["slam"]["max_range_m"] = 15.0  # 5,000 x 5,000: exactly the default limit
     parse_scenario(data)
+
+
+def test_a_device_or_folder_is_not_read():
+    for path in ("/dev/zero", Path(__file__).parent):
+        rc, text = _cli("validate", str(path))
+        assert rc == 2 and "the file is a directory or a device, not a regular file" in text

@@ -116,7 +116,14 @@ def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
     :mod:`agvsim.scenario_limits`)."""
     path = Path(path)
     if not path.is_file():
-        raise ScenarioError(str(path), ["no such file"])
+        raise ScenarioError(
+            str(path),
+            [
+                "the file is a directory or a device, not a regular file"
+                if path.exists()
+                else "no such file"
+            ],
+        )
     limits = limits or Limits()
     try:
         data = load_yaml_file(path, limits.yaml)
