@@ -46,6 +46,24 @@ def test_billion_laughs_is_refused_at_once():
     assert "aliases expand past the limit yaml_max_nodes" in str(info.value)
 
 
+def test_data_from_anywhere_is_measured_with_shared_parts_expanded():
+    from agvsim.safe_yaml import measure_data
+
+    x = [1, 2]
+    assert measure_data({"a": x, "b": [x, x]}, "t") == 13  # as the YAML above, aliases as refs
+    loop: list = []
+    loop.append(loop)  # a list holding itself counts once where it recurs
+    assert measure_data(loop, "t") == 2
+    with pytest.raises(YamlInputError, match="more than 12 values"):
+        measure_data({"a": x, "b": [x, x]}, "t", YamlLimits(max_nodes=12))
+    with pytest.raises(YamlInputError, match="nested deeper than 2 levels"):
+        measure_data([[[1]]], "t", YamlLimits(max_depth=2))
+    # the browser app parses with PyYAML itself: the loader still refuses the bomb unexpanded
+    data = yaml.safe_load((BAD / "alias_bomb_robots.yaml").read_text(encoding="utf-8"))
+    with pytest.raises(ScenarioError, match="more than 1,000,000 values"):
+        parse_scenario(data, "upload")
+
+
 def test_nesting_depth_is_limited():
     assert load_yaml("[[[1]]]", "t", YamlLimits(max_depth=3)) == [[[1]]]
     with pytest.raises(YamlInputError, match="nested deeper than 2 levels"):

@@ -24,7 +24,7 @@ from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
-from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file
+from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
 from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
 from agvsim.scenario_schema import (
     AvoidConfig,
@@ -82,14 +82,19 @@ def parse_scenario(
         raise ScenarioError(
             source, [f"the file must hold a mapping of keys, got {type(data).__name__}"]
         )
-    _count_robots_first(data, limits or Limits(), limits_from_file, source)
+    limits = limits or Limits()
+    try:  # data from anywhere (the app, a sweep): an alias bomb is refused before it is walked
+        measure_data(data, source, limits.yaml)
+    except YamlInputError as err:
+        raise ScenarioError(source, [_yaml_problem(err)]) from None
+    _count_robots_first(data, limits, limits_from_file, source)
     try:
         sc = Scenario.model_validate(data)
     except ValidationError as err:
         raise ScenarioError(source, _format_errors(err)) from None
     except RecursionError:  # data built in Python, nested past what any reader allows
         raise ScenarioError(source, ["the data is nested too deeply"]) from None
-    effective = (limits or Limits()).with_block(sc.limits, limits_from_file, source)
+    effective = limits.with_block(sc.limits, limits_from_file, source)
     problems = check_scenario(sc, effective)
     if problems:
         raise ScenarioError(source, problems)
