@@ -191,7 +191,8 @@ BASES: list[dict[str, Any]] = [
 ]
 
 NASTY: list[Any] = [
-    math.nan, math.inf, -math.inf, 1e40, -1e300, 1e-300, 10**40, -(2**63) - 1, 2**64, -5, 0, 0.0,
+    math.nan, math.inf, -math.inf, 1e40, -1e300, 1e-300, 10**40, 10**400, -(2**63) - 1, 2**64,
+    -5, 0, 0.0,
     -1, 1e9, True, None, "", "x" * 100_000, "not-a-colour", "\x00", "caf\u00e9", "1e40", "nan",
     [], {}, [[]], [1, 2, 3], {"type": "lidar"}, "thesis_c1", "../../etc/passwd", "/dev/zero",
 ]  # fmt: skip
@@ -242,12 +243,13 @@ def mutated_scenarios(draw: st.DrawFn) -> dict:
             parent[key] = round(value) if type(parent[key]) is int else value
             continue
         key = path[-1]
+        value = copy.deepcopy(draw(values))  # NASTY holds lists: never share (and mutate) them
         if action == "delete":
             del parent[key]
         elif action == "add" and isinstance(parent, dict):
-            parent[draw(st.sampled_from(["typo_key", "limits", "seed", "name"]))] = draw(values)
+            parent[draw(st.sampled_from(["typo_key", "limits", "seed", "name"]))] = value
         else:
-            parent[key] = draw(values)
+            parent[key] = value
     return data
 
 

@@ -46,6 +46,24 @@ def test_billion_laughs_is_refused_at_once():
     assert "aliases expand past the limit yaml_max_nodes" in str(info.value)
 
 
+def test_data_from_anywhere_is_measured_with_shared_parts_expanded():
+    from agvsim.safe_yaml import measure_data
+
+    x = [1, 2]
+    assert measure_data({"a": x, "b": [x, x]}, "t") == 13  # as the YAML above, aliases as refs
+    loop: list = []
+    loop.append(loop)  # a list holding itself counts once where it recurs
+    assert measure_data(loop, "t") == 2
+    with pytest.raises(YamlInputError, match="more than 12 values"):
+        measure_data({"a": x, "b": [x, x]}, "t", YamlLimits(max_nodes=12))
+    with pytest.raises(YamlInputError, match="nested deeper than 2 levels"):
+        measure_data([[[1]]], "t", YamlLimits(max_depth=2))
+    # the browser app parses with PyYAML itself: the loader still refuses the bomb unexpanded
+    data = yaml.safe_load((BAD / "alias_bomb_robots.yaml").read_text(encoding="utf-8"))
+    with pytest.raises(ScenarioError, match="more than 1,000,000 values"):
+        parse_scenario(data, "upload")
+
+
 def test_nesting_depth_is_limited():
     assert load_yaml("[[[1]]]", "t", YamlLimits(max_depth=3)) == [[[1]]]
     with pytest.raises(YamlInputError, match="nested deeper than 2 levels"):
@@ -126,6 +144,21 @@ def test_random_maze_cells():
         parse_scenario(data, limits=Limits(max_grid_cells=69))
 
 
+def test_maze_functions_check_their_inputs():
+    from agvsim.world import mazes
+
+    with pytest.raises(ValueError, match=r"7 x 10 = 70 cells is over the limit .* = 69"):
+        mazes.random_maze(2, 3, 1, max_cells=69)
+    assert mazes.random_maze(2, 3, 1, max_cells=70).occupied.shape == (7, 10)
+    for bad in (float("nan"), float("inf"), 0.0, -1.0, "1"):
+        with pytest.raises(ValueError, match="resolution_m must be"):
+            mazes.random_maze(2, 3, 1, resolution_m=bad)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="resolution_m must be"):
+            mazes.thesis_maze("thesis_c1", bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="loop_fraction"):
+        mazes.random_maze(2, 3, 1, loop_fraction=float("nan"))
+
+
 def test_sensor_rates():
     # a 320 x 240 camera at 10 Hz: 768,000 pixels/s; rangers 4 beams x 50 Hz (every step of
     # 0.02 s) + a 240-beam lidar at 10 Hz: 200 + 2,400 = 2,600 rays/s
@@ -184,6 +217,10 @@ def test_huge_finite_numbers_are_refused():
         "robots[0].controller.goto_goal.goal_x_m: too large (allowed: magnitude <= 1e+12) "
         "(got 10000000000000.0)",
     ]
+    data["robots"][0]["params"] = {"wheel_radius_m": 10**400}  # no float holds it
+    with pytest.raises(ScenarioError, match=r"params: wheel_radius_m: too large"):
+        parse_scenario(data)
+    del data["robots"][0]["params"]
     data["robots"][0]["controller"]["goal_x_m"] = 1e12  # the bound itself is allowed
     data["robots"][0]["sensors"][0]["angle_min_deg"] = -45.0
     assert parse_scenario(data).robots[0].controller.goal_x_m == 1e12
@@ -275,3 +312,48 @@ def test_trajectory_writer_refuses_a_zero_period(tmp_path):
     for every in (0, -3, 1.5):
         with pytest.raises(ValueError, match="record_every"):
             TrajectoryWriter(tmp_path / "t.csv", sim, every)  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------------------------- behaviours
+def _refused(data: dict) -> str:
+    with pytest.raises(ScenarioError) as info:
+        build(parse_scenario(data))
+    return "\n".join(info.value.problems)
+
+
+def test_goals_that_cannot_be_reached_are_refused():
+    data = _scenario()
+    robot = data["robots"][0]
+    robot["controller"] = {"type": "maze_solver", "goal_cell": [20, 3]}  # the map has rows 0..19
+    assert "goal_cell: [20, 3] is outside the 20 x 20 map (allowed: rows 0..19" in _refused(data)
+    robot["controller"] = {"type": "maze_solver", "method": "tremaux", "goal_cell": [3, 20]}
+    assert "goal_cell: [3, 20] is outside the 20 x 20 map" in _refused(data)
+    robot["controller"] = {"type": "maze_solver", "goal_x_m": 10.0, "goal_y_m": 0.0}
+    assert "(10, 0) is outside the map, which spans x in [-10, 10)" in _refused(data)
+    robot["sensors"] = [{"type": "camera", "width_px": 16, "height_px": 12}]
+    robot["controller"] = {"type": "marker_search", "marker_id": 50}  # 4x4_50: ids 0..49
+    assert "marker_id: 50 is not in 4x4_50, which holds ids 0..49" in _refused(data)
+    robot["controller"] = {"type": "marker_search", "marker_id": 29, "dictionary": "apriltag_16h5"}
+    build(parse_scenario(data))  # 16h5 holds 30 tags: 29 is the last
+
+
+def test_planning_and_slam_rasters_are_bounded():
+    # 100 m cells: A* would rasterise the 20 x 20 maze at 5 cm, 40,000 x 40,000 cells
+    data = _scenario(world={"maze": "thesis_c1", "cell_size_m": 100.0})
+    data["robots"][0]["pose"] = {"x_m": -800.0, "y_m": 500.0}
+    data["robots"][0]["controller"] = {"type": "maze_solver", "goal_cell": [17, 17]}
+    assert "40,000 x 40,000 = 1,600,000,000 cells of 5 cm" in _refused(data)
+    # SLAM: a 1000 m lidar at 6 mm cells rasterises 2 x 1000 / 0.006 = 333,334 cells a side
+    data = _scenario()
+    data["robots"][0]["sensors"] = [{"type": "lidar", "range_max_m": 1000.0}]
+    data["robots"][0]["slam"] = {"resolution_m": 0.006}
+    with pytest.raises(ScenarioError, match=r"robots\[0\]\.slam: .* 333,334 x 333,334 cells"):
+        parse_scenario(data)
+    data["robots"][0]["slam"]["max_range_m"] = 15.0  # 5,000 x 5,000: exactly the default limit
+    parse_scenario(data)
+
+
+def test_a_device_or_folder_is_not_read():
+    for path in ("/dev/zero", Path(__file__).parent):
+        rc, text = _cli("validate", str(path))
+        assert rc == 2 and "the file is a directory or a device, not a regular file" in text

@@ -40,6 +40,7 @@ from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
 from agvsim.control.wall_follow import WallFollower
 from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
+from agvsim.world.loaders import MAX_CELLS
 
 _Cell = Annotated[int, Field(ge=0, le=10_000_000)]  # numba takes 64-bit integers only
 
@@ -154,6 +155,25 @@ class MazeSolverConfig(_Config):
         return self
 
 
+def _check_goal_on_map(cfg: MazeSolverConfig, grid: Any) -> None:
+    """A goal off the map could never be reached: refuse it rather than search forever."""
+    if cfg.goal_cell is not None:
+        row, col = cfg.goal_cell
+        if not (row < grid.rows and col < grid.cols):
+            raise ValueError(
+                f"goal_cell: {[row, col]} is outside the {grid.rows} x {grid.cols} map "
+                f"(allowed: rows 0..{grid.rows - 1}, cols 0..{grid.cols - 1})"
+            )
+        return
+    xmin, xmax, ymin, ymax = grid.extent_m
+    x, y = cfg.goal_x_m, cfg.goal_y_m
+    if not (xmin <= x < xmax and ymin <= y < ymax):  # type: ignore[operator]
+        raise ValueError(
+            f"goal_x_m, goal_y_m: ({x:g}, {y:g}) is outside the map, which spans x in "
+            f"[{xmin:g}, {xmax:g}) and y in [{ymin:g}, {ymax:g}) m"
+        )
+
+
 def build_maze_solver(
     cfg: MazeSolverConfig, ctx: ControllerContext
 ) -> AStarMazeSolver | TremauxExplorer:
@@ -163,6 +183,7 @@ def build_maze_solver(
     width = float(getattr(spec, "body_width_m", 0.45))
     offset = float(getattr(spec, "body_offset_x_m", 0.0))
     goal_xy = None if cfg.goal_x_m is None else (cfg.goal_x_m, cfg.goal_y_m)
+    _check_goal_on_map(cfg, grid)
     if cfg.method == "tremaux":
         if goal_xy is None:
             x, y = grid.cell_center(*cfg.goal_cell)  # type: ignore[misc,union-attr]
@@ -178,6 +199,15 @@ def build_maze_solver(
             speed_m_s=cfg.speed_m_s,
             goal_tolerance_m=cfg.goal_tolerance_m,
             body_width_m=width,
+        )
+    # A* plans on a raster of <= 5 cm cells (agvsim.control.planning.ClearanceMap): bound it
+    up = max(1, math.ceil(grid.resolution_m / 0.05 - 1e-9))
+    cells = grid.rows * up * grid.cols * up
+    if cells > MAX_CELLS:
+        raise ValueError(
+            f"maze_solver (astar) would plan on {grid.rows * up:,} x {grid.cols * up:,} = "
+            f"{cells:,} cells of 5 cm, over the limit {MAX_CELLS:,}; use a smaller map "
+            "(world.cell_size_m, fewer cells) or method: tremaux"
         )
     return AStarMazeSolver(
         grid,
@@ -370,6 +400,16 @@ class MarkerSearchConfig(_Config):
 
 def build_marker_search(cfg: MarkerSearchConfig, ctx: ControllerContext) -> MarkerSearch:
     """The controller for one robot: its camera (by name) and body from its spec."""
+    from agvsim.world.markers import MarkerKind, dictionary_size
+
+    tag = cfg.dictionary.startswith("apriltag_")
+    kind = MarkerKind.APRILTAG if tag else MarkerKind.ARUCO
+    ids = dictionary_size(kind, cfg.dictionary.removeprefix("apriltag_"))
+    if cfg.marker_id >= ids:
+        raise ValueError(
+            f"marker_id: {cfg.marker_id} is not in {cfg.dictionary}, which holds ids "
+            f"0..{ids - 1}; such a marker cannot exist"
+        )
     spec = ctx.spec
     cams = {c.name: c for c in getattr(spec, "cameras", ())}
     if cfg.camera not in cams:

@@ -26,7 +26,8 @@ from typing import Any
 
 import yaml
 
-__all__ = ["YamlInputError", "YamlLimits", "load_yaml", "load_yaml_file"]
+__all__ = ["YamlInputError", "YamlLimits", "load_yaml", "load_yaml_file", "measure_data"]
+_CONTAINERS = (dict, list, tuple)
 
 try:  # libyaml: ~10x faster
     from yaml.cyaml import CParser as _Parser
@@ -191,3 +192,49 @@ def load_yaml_file(path: str | Path, limits: YamlLimits | None = None) -> Any:
     except OSError as err:
         raise YamlInputError(str(p), f"cannot read the file ({err.strerror or err})") from None
     return load_yaml(data, str(p), limits)
+
+
+def measure_data(data: Any, source: str, limits: YamlLimits | None = None) -> int:
+    """The number of values in ``data`` (dicts, lists, tuples and scalars) with shared
+    sub-structures counted every time they appear, as anything walking it would see them;
+    YamlInputError past ``limits.max_nodes`` or deeper than ``limits.max_depth``.
+
+    The safety net for data that did not come through :func:`load_yaml` (e.g. a PyYAML
+    ``safe_load`` elsewhere, where an alias bomb is a few shared lists): each container is
+    measured once, so a bomb costs its size in memory, not its expansion. Iterative; a
+    container that holds itself is measured as one value at the point it recurs."""
+    limits = limits or YamlLimits()
+    if not isinstance(data, dict | list | tuple):
+        return 1
+    sizes: dict[int, int] = {}
+    open_: set[int] = set()
+    # (container, depth, its container children once expanded (None before), its length)
+    stack: list[tuple[Any, int, list | None, int]] = [(data, 1, None, 0)]
+    while stack:
+        obj, depth, kids, length = stack.pop()
+        key = id(obj)
+        if kids is not None:  # all its children are measured
+            open_.discard(key)
+            size = 1 + length + sum(sizes.get(id(c), 1) - 1 for c in kids)
+            sizes[key] = size
+            if size > limits.max_nodes:
+                raise YamlInputError(
+                    source,
+                    f"the data holds more than {limits.max_nodes:,} values (shared parts "
+                    "counted each time; limit yaml_max_nodes, see docs/scenario.md, 'Limits')",
+                )
+            continue
+        if key in sizes or key in open_:
+            continue
+        if depth > limits.max_depth:
+            raise YamlInputError(
+                source,
+                f"lists/mappings nested deeper than {limits.max_depth} levels "
+                "(limit yaml_max_depth; see docs/scenario.md, 'Limits')",
+            )
+        open_.add(key)
+        items = [*obj.keys(), *obj.values()] if isinstance(obj, dict) else obj
+        kids = [c for c in items if isinstance(c, _CONTAINERS)]
+        stack.append((obj, depth, kids, len(items)))
+        stack.extend((c, depth + 1, None, 0) for c in kids if id(c) not in sizes)
+    return sizes.get(id(data), 1)

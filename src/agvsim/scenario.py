@@ -25,7 +25,7 @@ from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.dynamics.vehicle import check_dynamics
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
-from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file
+from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
 from agvsim.scenario_dynamics import dynamics_spec, floor_spec
 from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
 from agvsim.scenario_schema import (
@@ -84,14 +84,19 @@ def parse_scenario(
         raise ScenarioError(
             source, [f"the file must hold a mapping of keys, got {type(data).__name__}"]
         )
-    _count_robots_first(data, limits or Limits(), limits_from_file, source)
+    limits = limits or Limits()
+    try:  # data from anywhere (the app, a sweep): an alias bomb is refused before it is walked
+        measure_data(data, source, limits.yaml)
+    except YamlInputError as err:
+        raise ScenarioError(source, [_yaml_problem(err)]) from None
+    _count_robots_first(data, limits, limits_from_file, source)
     try:
         sc = Scenario.model_validate(data)
     except ValidationError as err:
         raise ScenarioError(source, _format_errors(err)) from None
     except RecursionError:  # data built in Python, nested past what any reader allows
         raise ScenarioError(source, ["the data is nested too deeply"]) from None
-    effective = (limits or Limits()).with_block(sc.limits, limits_from_file, source)
+    effective = limits.with_block(sc.limits, limits_from_file, source)
     problems = check_scenario(sc, effective)
     if problems:
         raise ScenarioError(source, problems)
@@ -118,7 +123,14 @@ def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
     :mod:`agvsim.scenario_limits`)."""
     path = Path(path)
     if not path.is_file():
-        raise ScenarioError(str(path), ["no such file"])
+        raise ScenarioError(
+            str(path),
+            [
+                "the file is a directory or a device, not a regular file"
+                if path.exists()
+                else "no such file"
+            ],
+        )
     limits = limits or Limits()
     try:
         data = load_yaml_file(path, limits.yaml)
@@ -175,6 +187,7 @@ def build_grid(cfg: WorldConfig, base_dir: Path, limits: Limits | None = None) -
             wall_cells=r.wall_cells,
             resolution_m=res,
             loop_fraction=r.loop_fraction,
+            max_cells=limits.max_grid_cells,
         )
     else:
         path = Path(cfg.file or "")
@@ -210,7 +223,7 @@ def _model(rc: RobotConfig, where: str) -> Any:
         numeric = isinstance(default, int | float | np.floating)
         if numeric and (isinstance(v, str | bool) or not isinstance(v, int | float)):
             raise ScenarioError("", [f"{where}.params.{k}: must be a number, got {v!r}"])
-        if numeric and not (math.isfinite(v) and abs(v) <= 1e12):
+        if numeric and not (abs(v) <= 1e12 and math.isfinite(v)):  # abs first: a huge int
             raise ScenarioError(
                 "", [f"{where}.params.{k}: {v!r} is not allowed (a finite number, |x| <= 1e12)"]
             )

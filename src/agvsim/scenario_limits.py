@@ -172,6 +172,29 @@ def grid_shape(world: WorldConfig) -> tuple[int, int] | None:
     return None
 
 
+def _slam_windows(sc: Scenario, limits: Limits) -> list[str]:
+    """SLAM rasters a window of twice the range used around each scan: bound its cells."""
+    out = []
+    for k, r in enumerate(sc.robots):
+        if r.slam is None:
+            continue
+        sensor = next((s for s in r.sensors if s.name == r.slam.sensor), None)
+        if sensor is None:
+            sensor = next((s for s in r.sensors if s.type == r.slam.sensor), None)
+        if sensor is None or sensor.type == "camera":
+            continue  # reported by the SLAM set-up itself
+        reach = r.slam.max_range_m or sensor.range_max_m  # type: ignore[union-attr]
+        side = math.ceil(2.0 * reach / r.slam.resolution_m)
+        if side * side > limits.max_grid_cells:
+            out.append(
+                f"robots[{k}].slam: a map window of 2 x {reach:g} m at resolution_m "
+                f"{r.slam.resolution_m:g} is {side:,} x {side:,} cells, over the limit "
+                f"max_grid_cells = {limits.max_grid_cells:,}; lower max_range_m, raise "
+                "resolution_m, or " + _how("max_grid_cells", side * side)
+            )
+    return out
+
+
 def check_scenario(sc: Scenario, limits: Limits) -> list[str]:
     """One line per limit the validated scenario breaks (empty when it keeps them all)."""
     problems = []
@@ -190,6 +213,7 @@ def check_scenario(sc: Scenario, limits: Limits) -> list[str]:
             check_grid_cells(*shape, limits, where)
         except ValueError as err:
             problems.append(str(err))
+    problems += _slam_windows(sc, limits)
     pixels = rays = 0.0
     step_hz = 1.0 / sc.dt_s  # a sensor takes at most one reading a step
     for r in sc.robots:

@@ -340,8 +340,10 @@ class RobotConfig(_Strict):
     def _numbers_or_text(cls, params: dict[str, Any]) -> dict[str, Any]:
         for key, value in params.items():
             number = isinstance(value, int | float) and not isinstance(value, bool)
-            if number and not math.isfinite(value):
+            if isinstance(value, float) and not math.isfinite(value):
                 raise ValueError(f"{key}: must be a finite number (NaN and inf are not allowed)")
+            if number and abs(value) > MAX_MAGNITUDE:  # an int of 400 digits: no float holds it
+                raise ValueError(f"{key}: too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
             if not (number or (isinstance(value, str) and len(value) <= 200)):
                 raise ValueError(
                     f"{key}: must be a number or a short text, got {short_repr(value)}"

@@ -14,7 +14,7 @@ import numpy as np
 from scipy import ndimage
 
 from agvsim.world.grid import OccupancyGrid
-from agvsim.world.loaders import parse_text_picture
+from agvsim.world.loaders import MAX_CELLS, parse_text_picture
 
 __all__ = [
     "THESIS_MAZES",
@@ -43,6 +43,14 @@ def _positive_int(value: int, name: str) -> int:
     return int(value)
 
 
+def _resolution(value: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.number):
+        raise ValueError(f"resolution_m must be a number of metres > 0, got {value!r}")
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"resolution_m must be a finite number of metres > 0, got {value!r}")
+    return float(value)
+
+
 def thesis_maze(name: str, resolution_m: float = 1.0) -> OccupancyGrid:
     """A thesis maze with ``resolution_m``-metre cells, centred on the world origin.
 
@@ -54,7 +62,7 @@ def thesis_maze(name: str, resolution_m: float = 1.0) -> OccupancyGrid:
     """
     if name not in THESIS_MAZES:
         raise ValueError(f"unknown thesis maze {name!r}; known: {', '.join(THESIS_MAZES)}")
-    return OccupancyGrid.from_matrix(THESIS_MAZES[name].occupied, resolution_m)
+    return OccupancyGrid.from_matrix(THESIS_MAZES[name].occupied, _resolution(resolution_m))
 
 
 def upsample(grid: OccupancyGrid, factor: int) -> OccupancyGrid:
@@ -90,6 +98,7 @@ def random_maze(
     wall_cells: int = 1,
     resolution_m: float = 1.0,
     loop_fraction: float = 0.0,
+    max_cells: int = MAX_CELLS,
 ) -> OccupancyGrid:
     """A random maze over a ``rows x cols`` lattice of rooms, centred on the world origin.
 
@@ -101,13 +110,21 @@ def random_maze(
     likewise wide), each cell ``resolution_m`` metres.
 
     ``rng_or_seed``: an int seed (``numpy.random.default_rng(seed)``) or a Generator, which is
-    advanced. The same seed always gives the same maze.
+    advanced. The same seed always gives the same maze. A grid of more than ``max_cells``
+    cells is refused (ValueError) before anything is generated.
     """
     rows, cols = _positive_int(rows, "rows"), _positive_int(cols, "cols")
     c = _positive_int(corridor_cells, "corridor_cells")
     w = _positive_int(wall_cells, "wall_cells")
     if not 0.0 <= loop_fraction <= 1.0:
         raise ValueError(f"loop_fraction must be in [0, 1], got {loop_fraction!r}")
+    resolution_m = _resolution(resolution_m)
+    height, width = rows * (c + w) + w, cols * (c + w) + w
+    if height * width > max_cells:
+        raise ValueError(
+            f"a random maze of {height:,} x {width:,} = {height * width:,} cells is over the "
+            f"limit max_grid_cells = {max_cells:,}"
+        )
     if isinstance(rng_or_seed, np.random.Generator):
         rng = rng_or_seed
     elif isinstance(rng_or_seed, int | np.integer) and not isinstance(rng_or_seed, bool):
