@@ -5,7 +5,7 @@ Per robot and sub-step h (docs/dynamics.md has the derivation):
     steering   delta_rate -> clip((target - delta) / max(tau_s, h), +-rate), acceleration-limited
     wheel i    contact velocity u = v_P + omega x p_i; slip s (wheel frame, or along the roller
                axis a for Mecanum/omni wheels); friction F = -mu N q(|s|) s (friction circle);
-               J phi' = tau_motor(phi) - r F . e  integrated linearly implicitly in phi
+               J phi' = tau_motor(phi) - r F . e  by backward Euler in phi (body velocity held)
     body       m (v_c' + omega x v_c) = sum F,   I_c omega' = sum (p_i - c) x F_i  (explicit,
                with the wheels' new speeds: Gauss-Seidel); the pose moves exactly on SE(2)
                with the mean of the sub-step's old and new twist
@@ -47,6 +47,18 @@ def _q(slip: float, vslip: float, tyre: bool) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def _dq(slip: float, vslip: float, tyre: bool) -> float:
+    """d q / d |s|."""
+    if tyre:
+        x = slip / vslip
+        if x < 1e-8:
+            return 0.0
+        t = math.tanh(x)
+        return (1.0 - t * t) / (vslip * slip) - t / (slip * slip)
+    return 0.0 if slip < vslip else -1.0 / (slip * slip)
+
+
+@njit(cache=True, error_model="numpy")
 def motor_torque(
     gain: float,
     target: float,
@@ -70,6 +82,73 @@ def motor_torque(
     if cmd < -lim:
         return -lim, 0.0
     return cmd, -gain
+
+
+@njit(cache=True, error_model="numpy")
+def _wheel_torques(
+    p: float,
+    v_main: float,
+    s_side: float,
+    c: float,
+    r: float,
+    mu_n: float,
+    b: np.ndarray,
+    target: float,
+) -> tuple[float, float, float]:
+    """Net torque g on a driven wheel spinning at p (motor + contact), dg/dp and the motor's
+    torque. The contact slips by s_main = v_main - r c p along its force axis (c = 1 for a
+    standard wheel, cos gamma for rollers) and s_side across it."""
+    tau, dtau = motor_torque(b[B_GAIN], target, p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0])
+    vslip, tyre = b[B_VSLIP], b[B_TYRE] > 0.5
+    sm = v_main - r * c * p
+    slip = math.hypot(sm, s_side)
+    q = _q(slip, vslip, tyre)
+    dfds = q + (_dq(slip, vslip, tyre) * sm * sm / slip if slip > 0.0 else 0.0)
+    return tau + r * c * mu_n * q * sm, dtau - r * r * c * c * mu_n * dfds, tau
+
+
+@njit(cache=True, error_model="numpy")
+def solve_wheel(
+    p: float,
+    h: float,
+    jw: float,
+    v_main: float,
+    s_side: float,
+    c: float,
+    r: float,
+    mu_n: float,
+    b: np.ndarray,
+    target: float,
+) -> tuple[float, float]:
+    """Backward Euler for one driven wheel's spin, J (p_new - p) = h g(p_new), with the body
+    velocity held: g decreases in p, so the root is unique; safeguarded Newton finds it
+    (stiff contacts and high controller gains stay stable, and a wheel that the brake
+    overpowers locks at once). Returns the new spin and the motor torque."""
+    g_max = b[B_GEAR] * max(b[B_TMAX], b[B_TSTALL]) + r * abs(c) * mu_n
+    lo, hi = p - h * g_max / jw - 1e-12, p + h * g_max / jw + 1e-12
+    r_lo, r_hi = -1.0, 1.0  # residual signs at the bracket ends; values once known
+    known_lo, known_hi = False, False
+    x = p
+    for _ in range(60):
+        g, dg, _tau = _wheel_torques(x, v_main, s_side, c, r, mu_n, b, target)
+        res = jw * (x - p) - h * g
+        if res == 0.0:
+            break
+        if res > 0.0:
+            hi, r_hi, known_hi = x, res, True
+        else:
+            lo, r_lo, known_lo = x, res, True
+        xn = x - res / (jw - h * dg)
+        if not lo < xn < hi:  # Newton left the bracket: false position, else bisection
+            xn = lo - r_lo * (hi - lo) / (r_hi - r_lo) if known_lo and known_hi else 0.5 * (lo + hi)
+            if not lo < xn < hi:
+                xn = 0.5 * (lo + hi)
+        if abs(xn - x) <= 1e-13 * (1.0 + abs(x)) or hi - lo <= 1e-13 * (1.0 + abs(x)):
+            x = xn
+            break
+        x = xn
+    _, _, tau = _wheel_torques(x, v_main, s_side, c, r, mu_n, b, target)
+    return x, tau
 
 
 @njit(cache=True, error_model="numpy")
@@ -199,13 +278,7 @@ def step_robots(
                     vl = ux * ca + uy * sa
                     vt = -ux * sa + uy * ca
                     if driven:
-                        sl = vl - r * p
-                        k = mu_n[i] * _q(math.hypot(sl, vt), vslip, tyre)
-                        tau, dtau = motor_torque(
-                            b[B_GAIN], target[d, i], p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0]
-                        )
-                        g = tau + r * k * sl
-                        p += h * g / (jw - h * (dtau - r * r * k))
+                        p, tau = solve_wheel(p, h, jw, vl, vt, 1.0, r, mu_n[i], b, target[d, i])
                         sl = vl - r * p
                     else:  # free rolling
                         p = vl / r
@@ -220,13 +293,7 @@ def step_robots(
                     ea = math.cos(gam)
                     su = ux * ax + uy * ay
                     if driven:
-                        s = su - r * p * ea
-                        k = mu_n[i] * _q(abs(s), vslip, tyre)
-                        tau, dtau = motor_torque(
-                            b[B_GAIN], target[d, i], p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0]
-                        )
-                        g = tau + r * k * s * ea
-                        p += h * g / (jw - h * (dtau - r * r * ea * ea * k))
+                        p, tau = solve_wheel(p, h, jw, su, 0.0, ea, r, mu_n[i], b, target[d, i])
                         s = su - r * p * ea
                     else:  # free rolling along its rolling direction
                         p = (ux * ca + uy * sa) / r
