@@ -19,9 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
-
-from agvsim.kinematics.base import se2_step
+from numba import njit, prange
 
 # columns of the per-robot table ``body`` (D, NB)
 B_MASS, B_INERTIA, B_CX, B_CY, B_RADIUS, B_WHEELBASE, B_GAIN, B_GEAR = 0, 1, 2, 3, 4, 5, 6, 7
@@ -128,33 +126,43 @@ def solve_wheel(
     lo, hi = p - h * g_max / jw - 1e-12, p + h * g_max / jw + 1e-12
     r_lo, r_hi = -1.0, 1.0  # residual signs at the bracket ends; values once known
     known_lo, known_hi = False, False
-    x = p
+    x, tau = p, 0.0
+    side = 0  # which end the last step moved: +1 hi, -1 lo (Illinois rule)
     for _ in range(60):
-        g, dg, _tau = _wheel_torques(x, v_main, s_side, c, r, mu_n, b, target)
+        g, dg, tau = _wheel_torques(x, v_main, s_side, c, r, mu_n, b, target)
         res = jw * (x - p) - h * g
         if res == 0.0:
-            break
+            return x, tau
         if res > 0.0:
             hi, r_hi, known_hi = x, res, True
+            if side == 1:
+                r_lo *= 0.5
+            side = 1
         else:
             lo, r_lo, known_lo = x, res, True
-        xn = x - res / (jw - h * dg)
-        if not lo < xn < hi:  # Newton left the bracket: false position, else bisection
+            if side == -1:
+                r_hi *= 0.5
+            side = -1
+        step = res / (jw - h * dg)
+        if abs(step) <= 1e-13 * (1.0 + abs(x)):
+            return x - step, tau
+        xn = x - step
+        if not lo < xn < hi:  # Newton left the bracket (a kink): false position or bisection
             xn = lo - r_lo * (hi - lo) / (r_hi - r_lo) if known_lo and known_hi else 0.5 * (lo + hi)
             if not lo < xn < hi:
                 xn = 0.5 * (lo + hi)
-        if abs(xn - x) <= 1e-13 * (1.0 + abs(x)) or hi - lo <= 1e-13 * (1.0 + abs(x)):
-            x = xn
-            break
+        if hi - lo <= 1e-13 * (1.0 + abs(x)):
+            return xn, tau
         x = xn
-    _, _, tau = _wheel_torques(x, v_main, s_side, c, r, mu_n, b, target)
     return x, tau
 
 
 @njit(cache=True, error_model="numpy")
 def substep_count(body: np.ndarray, wheel: np.ndarray, mu_n: np.ndarray, dt: float) -> int:
-    """Sub-steps for stability: h <= 0.5 min(m / sum k_i, I / sum k_i |p_i - c|^2) with the
-    contact stiffness k_i = mu N_i / slip_speed, and h <= max_substep_s."""
+    """Sub-steps for stability of the explicit body update: h (sum k_i / m + sum k_i
+    |p_i - c|^2 / I) <= 1, a bound on h times the fastest contact rate, with the contact
+    stiffness k_i = mu N_i / slip_speed (the wheels' spin is implicit and needs no bound);
+    and h <= max_substep_s."""
     nw = int(body[B_NW])
     csum, cyaw = 0.0, 0.0
     for i in range(nw):
@@ -162,11 +170,10 @@ def substep_count(body: np.ndarray, wheel: np.ndarray, mu_n: np.ndarray, dt: flo
         dx, dy = wheel[i, W_PX] - body[B_CX], wheel[i, W_PY] - body[B_CY]
         csum += k
         cyaw += k * (dx * dx + dy * dy)
+    rate = csum / body[B_MASS] + cyaw / body[B_INERTIA]
     h = body[B_MAXSUB]
-    if csum > 0.0:
-        h = min(h, 0.5 * body[B_MASS] / csum)
-    if cyaw > 0.0:
-        h = min(h, 0.5 * body[B_INERTIA] / cyaw)
+    if rate > 0.0:
+        h = min(h, 1.0 / rate)
     n = int(math.ceil(dt / h - 1e-9))
     return min(max(n, 1), MAX_SUBSTEPS)
 
@@ -201,7 +208,7 @@ def se2_log(dx: float, dy: float, dth: float, dt: float) -> tuple[float, float, 
     return vx, vy, a / dt
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", parallel=True)
 def step_robots(
     dt: float,
     poses: np.ndarray,  # (D, 3) world poses at the step start
@@ -226,8 +233,11 @@ def step_robots(
 ) -> None:
     n_rob = poses.shape[0]
     n_reg = regions.shape[0]
-    mu_n = np.zeros(wheel.shape[1])
-    for d in range(n_rob):
+    mu_all = np.zeros((n_rob, wheel.shape[1]))
+    dirs_all = np.zeros((n_rob, wheel.shape[1], 4))
+    for d in prange(n_rob):  # robots are independent: one thread each, same result
+        mu_n = mu_all[d]
+        dirs = dirs_all[d]  # cos, sin of each rolling direction and force axis
         b = body[d]
         nw = int(b[B_NW])
         if freeze[d]:
@@ -254,6 +264,15 @@ def step_robots(
         for i in range(nw):
             out_angle[d, i] = 0.0
             out_work[d, i] = 0.0
+        steered = False
+        for i in range(nw):  # fixed wheels: directions once a step
+            wi = wheel[d, i]
+            steered = steered or int(wi[W_STEER]) != STEER_NONE
+            ang = wheel_angle(wi, dl, b[B_WHEELBASE])
+            dirs[i, 0], dirs[i, 1] = math.cos(ang), math.sin(ang)
+            dirs[i, 2], dirs[i, 3] = math.cos(ang + wi[W_GAMMA]), math.sin(ang + wi[W_GAMMA])
+            out_steer[d, i] = ang
+        cr, sr = 1.0, 0.0  # rotation of the body since the step start
         for _ in range(n_sub):
             if b[B_STEER] > 0.5:  # first-order servo, rate and acceleration limited
                 rate = min(max((delta_target[d] - dl) / max(b[B_STAU], h), -b[B_RATE]), b[B_RATE])
@@ -267,18 +286,26 @@ def step_robots(
             for i in range(nw):
                 wi = wheel[d, i]
                 px, py = wi[W_PX], wi[W_PY]
-                ang = wheel_angle(wi, dl, b[B_WHEELBASE])
-                ca, sa = math.cos(ang), math.sin(ang)
+                if steered and int(wi[W_STEER]) != STEER_NONE:
+                    ang = wheel_angle(wi, dl, b[B_WHEELBASE])
+                    dirs[i, 0], dirs[i, 1] = math.cos(ang), math.sin(ang)
+                    dirs[i, 2], dirs[i, 3] = (
+                        math.cos(ang + wi[W_GAMMA]),
+                        math.sin(ang + wi[W_GAMMA]),
+                    )
+                    out_steer[d, i] = ang
+                ca, sa = dirs[i, 0], dirs[i, 1]
                 ux, uy = vx - w * py, vy + w * px  # contact point velocity, robot frame
                 driven = wi[W_DRIVEN] > 0.5
-                jw = wi[W_J]
                 p = phi[d, i]
                 tau = 0.0
                 if int(wi[W_KIND]) == KIND_2D:
                     vl = ux * ca + uy * sa
                     vt = -ux * sa + uy * ca
                     if driven:
-                        p, tau = solve_wheel(p, h, jw, vl, vt, 1.0, r, mu_n[i], b, target[d, i])
+                        p, tau = solve_wheel(
+                            p, h, wi[W_J], vl, vt, 1.0, r, mu_n[i], b, target[d, i]
+                        )
                         sl = vl - r * p
                     else:  # free rolling
                         p = vl / r
@@ -288,12 +315,13 @@ def step_robots(
                     fl, ft = -k * sl, -k * vt
                     fxi, fyi = fl * ca - ft * sa, fl * sa + ft * ca
                 else:
-                    gam = wi[W_GAMMA]
-                    ax, ay = math.cos(ang + gam), math.sin(ang + gam)
-                    ea = math.cos(gam)
+                    ax, ay = dirs[i, 2], dirs[i, 3]
+                    ea = ca * ax + sa * ay  # cos gamma
                     su = ux * ax + uy * ay
                     if driven:
-                        p, tau = solve_wheel(p, h, jw, su, 0.0, ea, r, mu_n[i], b, target[d, i])
+                        p, tau = solve_wheel(
+                            p, h, wi[W_J], su, 0.0, ea, r, mu_n[i], b, target[d, i]
+                        )
                         s = su - r * p * ea
                     else:  # free rolling along its rolling direction
                         p = (ux * ca + uy * sa) / r
@@ -309,20 +337,28 @@ def step_robots(
                 out_work[d, i] += tau * p * h
                 out_torque[d, i] = tau
                 out_slip[d, i] = sm
-                out_steer[d, i] = ang
-            # the body: centre-of-mass velocity, constant in the world frame but for the forces
-            vcx, vcy = vx - w * cy, vy + w * cx
-            a = -w * h
-            ca, sa = math.cos(a), math.sin(a)
-            vcx, vcy = ca * vcx - sa * vcy + h * fx / m, sa * vcx + ca * vcy + h * fy / m
+            # the body: the centre-of-mass velocity keeps its world direction (it turns by
+            # -a in the body frame as the body turns by a = mean omega h), plus the forces
             w0 = w
             w += h * mz / inertia
+            a = 0.5 * (w0 + w) * h
+            sin_a, cos_a = math.sin(a), math.cos(a)
+            vcx, vcy = vx - w0 * cy, vy + w0 * cx
+            vcx, vcy = (
+                cos_a * vcx + sin_a * vcy + h * fx / m,
+                -sin_a * vcx + cos_a * vcy + h * fy / m,
+            )
             vx0, vy0 = vx, vy
             vx, vy = vcx + w * cy, vcy - w * cx
-            # the pose moves with the mean of the old and new twist (trapezoidal)
-            rx, ry, rth = se2_step(
-                rx, ry, rth, 0.5 * (vx0 + vx), 0.5 * (vy0 + vy), 0.5 * (w0 + w), h
-            )
+            # the pose moves exactly (SE(2)) with the mean of the old and new twist
+            mx, my = 0.5 * (vx0 + vx) * h, 0.5 * (vy0 + vy) * h
+            sinc = 1.0 - a * a / 6.0 if abs(a) < 1e-6 else sin_a / a
+            cosc = sinc * sin_a / (1.0 + cos_a)  # (1 - cos a) / a without cancellation
+            dx, dy = mx * sinc - my * cosc, mx * cosc + my * sinc
+            rx += cr * dx - sr * dy
+            ry += sr * dx + cr * dy
+            cr, sr = cr * cos_a - sr * sin_a, sr * cos_a + cr * sin_a
+            rth += a
         vel[d, 0], vel[d, 1], vel[d, 2] = vx, vy, w
         delta[d], delta_rate[d] = dl, dr
         out_twist[d, 0], out_twist[d, 1], out_twist[d, 2] = se2_log(rx, ry, rth, dt)

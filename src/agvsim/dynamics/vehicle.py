@@ -215,6 +215,7 @@ class Dynamics:
         self.delta_rate = np.zeros(n)
         self.energy_j = np.zeros((n, w))  # motor work since reset
         self.brakes = BrakeMonitor(n)
+        self.last_substeps = np.zeros(n, dtype=np.int64)
         for d, r in enumerate(self.robots):
             if self.loads[d] != r.dynamics.load:  # type: ignore[union-attr]
                 self._fill(d, r, None)
@@ -264,6 +265,7 @@ class Dynamics:
             nsub,
         )
         self.energy_j += work
+        self.last_substeps = nsub
         steer_angles = np.where(
             self._has_steer_col, np.take_along_axis(steer, self._steer_take, axis=1), 0.0
         )
