@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -362,6 +363,7 @@ def test_matches_solve_ivp(name):
     assert np.hypot(*ref[-1, :2]) > 0.3  # it went somewhere
 
 
+@pytest.mark.slow
 def test_error_against_solve_ivp_halves_with_the_substep():
     errs = []
     for h in (1e-3, 5e-4):
@@ -568,3 +570,54 @@ def test_bad_dynamics_blocks_are_refused_clearly(dyn, floor, message):
     with pytest.raises(ScenarioError) as err:
         build(parse_scenario(scenario(dyn, floor, "tricycle")))
     assert message in str(err.value)
+
+
+# ------------------------------------------------------------------ shipped scenarios
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def test_braking_scenario_stops_against_the_closed_form(tmp_path):
+    """Dry: the empty robot is friction-limited, the loaded one motor-limited (2.4x longer);
+    wet: both friction-limited and equal. Every stop within 1 % of its closed form."""
+    from agvsim.runner import run_scenario
+
+    data = run_scenario(
+        SCENARIOS / "dynamics_braking.yaml", tmp_path, plot=False, record_mcap=False
+    )
+    stops = {r["name"]: r["stops"][0] for r in data["dynamics"]}
+    for s in stops.values():
+        assert s["distance_m"] == pytest.approx(s["closed_form_m"], rel=0.01)
+    assert stops["empty_dry"]["closed_form_m"] == pytest.approx(
+        1.5**2 / (2 * 0.8 * G_M_S2), abs=1e-6
+    )
+    assert stops["loaded_dry"]["distance_m"] > 2.2 * stops["empty_dry"]["distance_m"]
+    assert stops["loaded_wet"]["closed_form_m"] == stops["empty_wet"]["closed_form_m"]
+    header = (tmp_path / "trajectory.csv").read_text().splitlines()[0].split(",")
+    assert header[-12:] == [
+        f"wheel{k}_{q}" for q in ("torque_nm", "slip_m_s", "power_w") for k in (1, 2, 3, 4)
+    ]
+
+
+def test_mecanum_oil_scenario_slides_and_drifts(tmp_path):
+    from agvsim.runner import run_scenario
+
+    data = run_scenario(
+        SCENARIOS / "dynamics_mecanum_oil.yaml", tmp_path, plot=False, record_mcap=False
+    )
+    stops = {r["name"]: r["stops"][0] for r in data["dynamics"]}
+    assert stops["oily"]["mu"] == 0.1 and stops["dry"]["mu"] == 0.8
+    expected = math.sqrt(2) * 0.8**2 / (2 * 0.1 * G_M_S2)
+    assert stops["oily"]["distance_m"] == pytest.approx(expected, rel=0.01)
+    errors = {r["name"]: r["odometry_error_m"] for r in data["robots"]}
+    assert errors["oily"] > 0.3 and errors["dry"] < 1e-6
+
+
+def test_thesis_maze_with_dynamics_drifts_without_encoder_noise(tmp_path):
+    from agvsim.runner import run_scenario
+
+    data = run_scenario(
+        SCENARIOS / "dynamics_thesis_maze.yaml", tmp_path, 40.0, plot=False, record_mcap=False
+    )
+    robot = data["robots"][0]
+    assert robot["distance_m"] > 20.0
+    assert robot["odometry_error_m"] > 0.2

@@ -10,6 +10,7 @@ per wheel.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -17,7 +18,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from agvsim.dynamics import kernel as K
-from agvsim.dynamics.braking import BrakeMonitor, braking_deceleration_m_s2
+from agvsim.dynamics.braking import (
+    BrakeMonitor,
+    braking_deceleration_m_s2,
+    stopping_distance_m,
+)
 from agvsim.dynamics.spec import G_M_S2, FloorFriction, FrictionModel, LoadSpec
 
 if TYPE_CHECKING:
@@ -200,12 +205,23 @@ class Dynamics:
     def mass_kg(self) -> np.ndarray:
         return self.body[:, K.B_MASS].copy()
 
-    def braking_deceleration_m_s2(self, robot_index: int, mu: float | None = None) -> float:
-        """Straight-line braking limit of a robot as loaded now (see ``braking``); ``mu``
-        defaults to the floor's."""
+    def braking_deceleration_m_s2(
+        self, robot_index: int, mu: float | None = None, direction_rad: float = 0.0
+    ) -> float:
+        """Straight-line braking limit of a robot as loaded now, moving in ``direction_rad``
+        (robot frame; see ``braking``); ``mu`` defaults to the floor's."""
         d = self.row(robot_index)
         mu_w = np.full(int(self.body[d, K.B_NW]), self.floor.mu if mu is None else mu)
-        return braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w)
+        return braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w, direction_rad)
+
+    def stopping_distance_m(
+        self, robot_index: int, speed_m_s: float, mu: float | None = None,
+        reaction_time_s: float = 0.0, direction_rad: float = 0.0,
+    ) -> float:  # fmt: skip
+        """Closed-form stopping distance of a robot as loaded now (the safety-field hook):
+        ``speed_m_s`` t_react + v^2 / (2 a_max)."""
+        a = self.braking_deceleration_m_s2(robot_index, mu, direction_rad)
+        return stopping_distance_m(speed_m_s, a, reaction_time_s)
 
     def reset(self, steering: np.ndarray) -> None:
         n, w = self.wheel.shape[:2]
@@ -241,7 +257,8 @@ class Dynamics:
         slip = np.zeros((n, w))
         work = np.zeros((n, w))
         nsub = np.zeros(n, dtype=np.int64)
-        speed0 = np.hypot(self.vel[:, 0], self.vel[:, 1])
+        vel0 = self.vel.copy()
+        speed0 = np.hypot(vel0[:, 0], vel0[:, 1])
         K.step_robots(
             float(dt),
             np.ascontiguousarray(poses),
@@ -272,7 +289,7 @@ class Dynamics:
         driven = self.wheel[:, :, K.W_DRIVEN] > 0.5
         braking = ~np.any(driven & (np.abs(targets) > 1e-12), axis=1)
         self.brakes.update(
-            t_s, poses, twist, dt, speed0, np.hypot(self.vel[:, 0], self.vel[:, 1]), braking
+            t_s, poses, twist, dt, speed0, np.hypot(self.vel[:, 0], self.vel[:, 1]), braking, vel0
         )
         return DynamicsStep(
             twist, angle / dt, self.delta.copy(), steer_angles, torque, slip, work / dt, nsub
@@ -289,12 +306,13 @@ class Dynamics:
                 px, py = self.wheel[d, :nw, K.W_PX], self.wheel[d, :nw, K.W_PY]
                 c, s = np.cos(ev.pose[2]), np.sin(ev.pose[2])
                 mu_w = self.floor.mu_at(ev.pose[0] + c * px - s * py, ev.pose[1] + s * px + c * py)
-                a = braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w)
+                a = braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w, ev.direction_rad)
                 predicted = ev.speed_m_s**2 / (2.0 * a)
                 events.append(
                     {
                         "t_start_s": round(ev.t_s, 6),
                         "speed_m_s": round(ev.speed_m_s, 6),
+                        "direction_deg": round(math.degrees(ev.direction_rad), 3),
                         "distance_m": round(ev.distance_m, 6),
                         "closed_form_m": round(float(predicted), 6),
                         "deceleration_limit_m_s2": round(float(a), 6),
