@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from agvsim.dynamics import (
@@ -621,3 +623,89 @@ def test_thesis_maze_with_dynamics_drifts_without_encoder_noise(tmp_path):
     robot = data["robots"][0]
     assert robot["distance_m"] > 20.0
     assert robot["odometry_error_m"] > 0.2
+
+
+# ------------------------------------------------------------------ actuators, loads, stability
+def test_steering_actuator_respects_rate_and_torque_limits():
+    """A step of the steering target: the angle first accelerates at T / J, then turns at
+    the model's rate limit: delta(t) = rate t - rate^2 / (2 T / J) once at the rate."""
+    model = Tricycle(wheel_radius_m=0.1, wheelbase_m=0.6, half_track_m=0.25,
+                     max_steer_rate_rad_s=1.0)  # fmt: skip
+    rob = RobotSpec(
+        "t",
+        model,
+        body_offset_x_m=0.3,
+        dynamics=DynamicsSpec(
+            steering=SteeringActuatorSpec(
+                torque_max_nm=2.0, inertia_kg_m2=0.1, time_constant_s=0.01
+            ),  # fmt: skip
+            max_substep_s=1e-4,
+        ),
+    )
+    dyn = Dynamics([rob], FloorFriction(), 4, 2)
+    pose = np.zeros((1, 3))
+    acc, rate, prev = 20.0, 1.0, 0.0
+    for _ in range(15):
+        out = dyn.step(pose, np.zeros((1, 4)), np.array([0.5]), np.zeros(1, bool), 0.02, 0.0)
+        assert abs(dyn.delta_rate[0]) <= rate + 1e-12
+        assert abs(dyn.delta[0] - prev) <= rate * 0.02 + 1e-12
+        prev = dyn.delta[0]
+    t = 15 * 0.02
+    assert dyn.delta[0] == pytest.approx(rate * t - rate**2 / (2 * acc), abs=2e-4)
+    assert out.steer_angles[0, 0] == pytest.approx(dyn.delta[0])
+
+
+def test_picking_a_load_lengthens_the_next_stop():
+    """A torque-limited robot picks a 90 kg load between two stops: the closed form and the
+    measured distance grow by (m + 90 + 2 J / r^2) / (m + 2 J / r^2)."""
+    rob = robot(mass_kg=40.0, motor=MotorSpec(gear_ratio=10.0, torque_max_nm=0.4,
+                                              time_constant_s=0.002))  # fmt: skip
+    plan = [(2.0, (1.0, 0.0, 0.0)), (4.0, (0.0, 0.0, 0.0)), (6.0, (1.0, 0.0, 0.0))]
+    sim = sim_of(rob, plan)
+    sim.run(4.0)
+    before = sim.dynamics.stopping_distance_m(0, 1.0)
+    sim.dynamics.set_load(0, LoadSpec(90.0, (0.0, 0.0)))
+    sim.run(5.0)
+    after = sim.dynamics.stopping_distance_m(0, 1.0)
+    m_eff = 40.0 + 2 * (0.01 + 2e-5 * 100) / 0.01
+    assert after / before == pytest.approx((m_eff + 90.0) / m_eff, rel=1e-9)
+    stops = sim.dynamics.summary()[0]["stops"]
+    assert [s["distance_m"] for s in stops] == pytest.approx(
+        [stops[0]["closed_form_m"], stops[1]["closed_form_m"]], rel=0.01
+    )
+    assert stops[1]["closed_form_m"] == pytest.approx(after * stops[1]["speed_m_s"] ** 2, rel=1e-5)
+    sim.reset()
+    assert sim.dynamics.mass_kg().tolist() == [40.0]
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    name=st.sampled_from(sorted(MODELS)),
+    mass=st.floats(5.0, 500.0),
+    mu=st.floats(0.05, 1.5),
+    slip=st.floats(0.005, 0.2),
+    torque=st.floats(0.05, 10.0),
+    tau=st.floats(0.002, 0.5),
+    seed=st.integers(0, 1000),
+)
+def test_any_sensible_robot_stays_stable_and_passive(name, mass, mu, slip, torque, tau, seed):
+    """Automatic sub-steps keep every model stable for any sensible mass, friction, slip
+    zone, motor and controller: finite, and never more kinetic energy than motor work."""
+    rng = np.random.default_rng(seed)
+    rob = robot(
+        name,
+        mass_kg=mass,
+        slip_speed_m_s=slip,
+        motor=MotorSpec(torque_max_nm=torque, time_constant_s=tau),
+        com_xy_m=(0.3, 0.0) if name in ("tricycle", "ackermann") else (0.0, 0.0),
+    )
+    dyn = Dynamics([rob], FloorFriction(mu), 4, 2)
+    pose = np.zeros((1, 3))
+    for k in range(100):
+        if k % 25 == 0:
+            targets, delta = rng.uniform(-20, 20, (1, 4)), rng.uniform(-0.6, 0.6, 1)
+        out = dyn.step(pose, targets, delta, np.zeros(1, bool), 0.02, 0.0)
+        pose = integrate_se2(pose, out.twist, 0.02)
+        work = dyn.energy_j[0].sum()
+        assert np.all(np.isfinite(dyn.vel)) and np.all(np.isfinite(dyn.phi))
+        assert kinetic_energy(dyn) <= work + 1e-9 * max(1.0, work)

@@ -94,6 +94,8 @@ class Stop:
     pose: np.ndarray  # (3,) pose then
     direction_rad: float  # direction of travel then (robot frame)
     distance_m: float = 0.0
+    deceleration_m_s2: float = math.nan  # closed-form limit then (as loaded, on that floor)
+    mu: float = math.nan  # lowest friction under its wheels then
 
 
 class BrakeMonitor:
@@ -105,6 +107,7 @@ class BrakeMonitor:
         self.min_speed, self.rest_speed = min_speed_m_s, rest_speed_m_s
         self.active: list[Stop | None] = [None] * n
         self._on = np.zeros(n, dtype=bool)
+        self.started: list[int] = []  # rows whose stop began in the last update
         self.events: list[list[Stop]] = [[] for _ in range(n)]
 
     def update(
@@ -122,6 +125,7 @@ class BrakeMonitor:
         start and end, ``braking`` (D,) all driven wheels commanded to zero, ``velocity``
         (D, 3) at its start."""
         starting = braking & (speed_before > self.min_speed)
+        self.started = []
         for d in np.flatnonzero(starting | self._on):
             stop = self.active[d]
             if not braking[d]:
@@ -131,6 +135,7 @@ class BrakeMonitor:
                 psi = math.atan2(velocity[d, 1], velocity[d, 0])
                 stop = Stop(t_s, float(speed_before[d]), poses[d].copy(), psi)
                 self.active[d], self._on[d] = stop, True
+                self.started.append(int(d))
             stop.distance_m += float(math.hypot(twist[d, 0], twist[d, 1])) * dt
             if speed_after[d] < self.rest_speed:
                 self.events[d].append(stop)

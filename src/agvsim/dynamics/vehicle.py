@@ -291,9 +291,24 @@ class Dynamics:
         self.brakes.update(
             t_s, poses, twist, dt, speed0, np.hypot(self.vel[:, 0], self.vel[:, 1]), braking, vel0
         )
+        for d in self.brakes.started:  # the closed form as loaded and on the floor now
+            stop = self.brakes.active[d]
+            assert stop is not None
+            mu_w = self._mu_under(d, stop.pose)
+            stop.mu = float(mu_w.min())
+            stop.deceleration_m_s2 = braking_deceleration_m_s2(
+                self.body[d], self.wheel[d], mu_w, stop.direction_rad
+            )
         return DynamicsStep(
             twist, angle / dt, self.delta.copy(), steer_angles, torque, slip, work / dt, nsub
         )
+
+    def _mu_under(self, d: int, pose: np.ndarray) -> np.ndarray:
+        """Friction under each wheel of row d at a world pose."""
+        nw = int(self.body[d, K.B_NW])
+        px, py = self.wheel[d, :nw, K.W_PX], self.wheel[d, :nw, K.W_PY]
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        return self.floor.mu_at(pose[0] + c * px - s * py, pose[1] + s * px + c * py)
 
     def summary(self) -> list[dict]:
         """Per dynamic robot: mass, energy per wheel and the braking events measured against
@@ -302,12 +317,7 @@ class Dynamics:
         for d, r in enumerate(self.robots):
             events = []
             for ev in self.brakes.events[d]:
-                nw = int(self.body[d, K.B_NW])
-                px, py = self.wheel[d, :nw, K.W_PX], self.wheel[d, :nw, K.W_PY]
-                c, s = np.cos(ev.pose[2]), np.sin(ev.pose[2])
-                mu_w = self.floor.mu_at(ev.pose[0] + c * px - s * py, ev.pose[1] + s * px + c * py)
-                a = braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w, ev.direction_rad)
-                predicted = ev.speed_m_s**2 / (2.0 * a)
+                predicted = ev.speed_m_s**2 / (2.0 * ev.deceleration_m_s2)
                 events.append(
                     {
                         "t_start_s": round(ev.t_s, 6),
@@ -315,8 +325,8 @@ class Dynamics:
                         "direction_deg": round(math.degrees(ev.direction_rad), 3),
                         "distance_m": round(ev.distance_m, 6),
                         "closed_form_m": round(float(predicted), 6),
-                        "deceleration_limit_m_s2": round(float(a), 6),
-                        "mu": round(float(mu_w.min()), 6),
+                        "deceleration_limit_m_s2": round(ev.deceleration_m_s2, 6),
+                        "mu": round(ev.mu, 6),
                     }
                 )
             out.append(
