@@ -24,6 +24,10 @@ topic                           type                         when
 /<robot>/<camera>/image/...     sensor_msgs/CompressedImage  every camera frame (JPEG)
 /<robot>/<camera>/camera_info   sensor_msgs/CameraInfo       with every frame (its intrinsics K)
 /<robot>/slam/map               nav_msgs/OccupancyGrid       ``write_slam_map`` (online SLAM)
+/<robot>/joint_states           sensor_msgs/JointState       pose rate, robots with dynamics:
+                                                             wheel angle, speed, torque (N m)
+/<robot>/wheel_slip             std_msgs/Float64MultiArray   pose rate, robots with dynamics:
+                                                             slip speed of each wheel (m/s)
 ==============================  ===========================  ==================================
 
 Message times (log, publish and header stamps) are the simulated time, from 0. The file is
@@ -137,6 +141,8 @@ class Recorder:
         pairs = []
         for rt in self.robot_topics:
             pairs += [("map", f"{rt}/odom"), (f"{rt}/odom", f"{rt}/base_link")]
+        dyn = sim.dynamics
+        self._wheel_rows = [] if dyn is None else [int(i) for i in dyn.idx]
         self._tf = msg.TfEncoder(pairs)
         self._tf_channel = self._channel("/tf", msg.TF_MESSAGE)
         frames = sim_frames(sim)
@@ -225,6 +231,7 @@ class Recorder:
                                  g.origin_xy_m, trinary=True)  # fmt: skip
         if t_s >= self._next_pose_s - 1e-9:
             self._write_poses(t_s, t_ns)
+            self._write_wheels(t_ns)
             self._next_pose_s = t_s + self.pose_period_s
         self._write_scans(t_ns)
         if self._camera_seq:
@@ -266,6 +273,24 @@ class Recorder:
             write(c_gt, t_ns, e_gt.encode(t_ns, gt_l[i], tw_l[i]))
             write(c_odo, t_ns, e_odo.encode(t_ns, odo_l[i], otw_l[i]))
         write(self._tf_channel, t_ns, self._tf.encode(t_ns, tf))
+
+    def _write_wheels(self, t_ns: int) -> None:
+        """Wheel joints (angle, speed, torque) and slip of the robots with dynamics."""
+        st = self.sim.state
+        for i in self._wheel_rows:
+            rt, names = self.robot_topics[i], list(self.sim.robots[i].model.wheel_names)
+            n = len(names)
+            data = msg.encode_joint_state(
+                t_ns,
+                f"{rt}/base_link",
+                names,
+                st.wheel_angles[i, :n].tolist(),
+                st.wheel_speeds[i, :n].tolist(),
+                st.wheel_torque_nm[i, :n].tolist(),
+            )
+            self._write(f"/{rt}/joint_states", msg.JOINT_STATE, t_ns, data)
+            slip = msg.encode_float64_multi_array("wheel", st.wheel_slip_m_s[i, :n].tolist())
+            self._write(f"/{rt}/wheel_slip", msg.FLOAT64_MULTI_ARRAY, t_ns, slip)
 
     def _write_scans(self, t_ns: int) -> None:
         st, tab = self.sim.state, self.sim.sensors

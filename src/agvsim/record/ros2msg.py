@@ -62,6 +62,13 @@ _DEFS: dict[str, str] = {
         "float64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\n"
         "uint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"
     ),
+    "sensor_msgs/JointState": (
+        "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
+        "float64[] effort\n"
+    ),
+    "std_msgs/MultiArrayDimension": "string label\nuint32 size\nuint32 stride\n",
+    "std_msgs/MultiArrayLayout": "std_msgs/MultiArrayDimension[] dim\nuint32 data_offset\n",
+    "std_msgs/Float64MultiArray": "std_msgs/MultiArrayLayout layout\nfloat64[] data\n",
 }
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -71,7 +78,12 @@ OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 STRING = "std_msgs/msg/String"
-TYPES = (TF_MESSAGE, ODOMETRY, LASER_SCAN, OCCUPANCY_GRID, COMPRESSED_IMAGE, CAMERA_INFO, STRING)
+JOINT_STATE = "sensor_msgs/msg/JointState"
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+TYPES = (
+    TF_MESSAGE, ODOMETRY, LASER_SCAN, OCCUPANCY_GRID, COMPRESSED_IMAGE, CAMERA_INFO, STRING,
+    JOINT_STATE, FLOAT64_MULTI_ARRAY,
+)  # fmt: skip
 
 _SEP = "=" * 80 + "\n"
 _BAD = re.compile(r"[^A-Za-z0-9_]")
@@ -217,6 +229,41 @@ def encode_tf_3d(t_ns: int, transforms: list[Transform3D]) -> bytes:
         c.header(t_ns, parent)
         c.string(child)
         c.f64(*xyz, *q)
+    return c.bytes()
+
+
+def encode_joint_state(
+    t_ns: int,
+    frame_id: str,
+    names: list[str],
+    position: list[float],
+    velocity: list[float],
+    effort: list[float],
+) -> bytes:
+    """``sensor_msgs/JointState``: one entry per joint (rad, rad/s, N m)."""
+    c = Cdr()
+    c.header(t_ns, frame_id)
+    c.u32(len(names))
+    for n in names:
+        c.string(n)
+    for values in (position, velocity, effort):
+        c.u32(len(values))
+        if values:
+            c.f64(*values)
+    return c.bytes()
+
+
+def encode_float64_multi_array(label: str, values: list[float]) -> bytes:
+    """``std_msgs/Float64MultiArray`` with one dimension named ``label``."""
+    c = Cdr()
+    c.u32(1)
+    c.string(label)
+    c.u32(len(values))
+    c.u32(1)
+    c.u32(0)  # data_offset
+    c.u32(len(values))
+    if values:
+        c.f64(*values)
     return c.bytes()
 
 
