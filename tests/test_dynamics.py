@@ -709,3 +709,18 @@ def test_any_sensible_robot_stays_stable_and_passive(name, mass, mu, slip, torqu
         work = dyn.energy_j[0].sum()
         assert np.all(np.isfinite(dyn.vel)) and np.all(np.isfinite(dyn.phi))
         assert kinetic_energy(dyn) <= work + 1e-9 * max(1.0, work)
+
+
+def test_wheels_plot_reads_torque_and_slip_back(tmp_path):
+    from agvsim.runner import run_scenario
+    from agvsim.viz.wheels_plot import read_wheels
+
+    run_scenario(SCENARIOS / "dynamics_braking.yaml", tmp_path, 3.5, record_mcap=False)
+    assert (tmp_path / "wheels.png").stat().st_size > 10_000
+    data = read_wheels(tmp_path / "trajectory.csv", {"empty_wet": ["left", "right"]})
+    d = data["empty_wet"]
+    assert d["t"][0] == 0.0 and d["t"][-1] == pytest.approx(3.5)
+    assert d["torque_nm"].shape == d["slip_m_s"].shape == (len(d["t"]), 2)
+    braking = (d["t"] > 3.05) & (d["t"] < 3.4)  # sliding on the wet strip, wheels held
+    assert np.all(d["torque_nm"][braking] < 0) and np.all(d["slip_m_s"][braking] > 0.2)
+    assert np.all(np.diff(d["slip_m_s"][braking, 0]) < 0)
