@@ -724,3 +724,22 @@ def test_wheels_plot_reads_torque_and_slip_back(tmp_path):
     braking = (d["t"] > 3.05) & (d["t"] < 3.4)  # sliding on the wet strip, wheels held
     assert np.all(d["torque_nm"][braking] < 0) and np.all(d["slip_m_s"][braking] > 0.2)
     assert np.all(np.diff(d["slip_m_s"][braking, 0]) < 0)
+
+
+def test_mask_fields_turn_dynamics_on_and_off():
+    """The robot panel's dynamics fields: unset keys stay unset, the result validates."""
+    from agvsim.app.mask import mask_fields, robot_from_mask
+    from agvsim.scenario import parse_scenario
+
+    entry = {"name": "a", "model": "differential"}
+    fields = {f.key: f.value for f in mask_fields(entry)}
+    assert fields["dynamics"] is False and fields["dynamics.mass_kg"] == 40.0
+    fields.update({"dynamics": True, "dynamics.mass_kg": 70.0, "dynamics.load.mass_kg": 25.0})
+    on = robot_from_mask(entry, fields)
+    assert on["dynamics"] == {"mass_kg": 70.0, "load": {"mass_kg": 25.0}}
+    sc = parse_scenario({"world": {"picture": "....\n...."}, "robots": [on]})
+    assert sc.robots[0].dynamics.load.mass_kg == 25.0
+    again = {f.key: f.value for f in mask_fields(on)}
+    assert again["dynamics"] is True and again["dynamics.motor.gear_ratio"] == 20.0
+    again["dynamics"] = False
+    assert "dynamics" not in robot_from_mask(on, again)
