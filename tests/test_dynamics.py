@@ -743,3 +743,46 @@ def test_mask_fields_turn_dynamics_on_and_off():
     assert again["dynamics"] is True and again["dynamics.motor.gear_ratio"] == 20.0
     again["dynamics"] = False
     assert "dynamics" not in robot_from_mask(on, again)
+
+
+def test_same_scenario_and_seed_give_bit_identical_dynamics():
+    from agvsim.scenario import build, load_scenario
+
+    sc = load_scenario(SCENARIOS / "dynamics_thesis_maze.yaml")
+    runs = []
+    for _ in range(2):
+        sim = build(sc)
+        sim.run(4.0)
+        runs.append((sim.state.poses.copy(), sim.state.odom_poses.copy(), sim.dynamics.phi.copy()))
+    sim.reset()
+    sim.run(4.0)
+    runs.append((sim.state.poses.copy(), sim.state.odom_poses.copy(), sim.dynamics.phi.copy()))
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other, strict=True):
+            assert np.array_equal(a, b)
+    assert np.hypot(*runs[0][0][0, :2] - [-2.0, -8.0]) > 1.0
+
+
+def test_motor_torque_speed_line_caps_the_top_speed():
+    """A flat peak torque up to the knee, then the DC-motor line: the wheels creep up to the
+    motor's no-load speed / G and never beyond, and the start is torque-limited."""
+    motor = MotorSpec(gear_ratio=10.0, torque_max_nm=0.5, stall_torque_nm=1.0,
+                      no_load_speed_rad_s=100.0)  # fmt: skip
+    rob = RobotSpec(
+        "r",
+        DifferentialDrive(wheel_radius_m=0.1, half_track_m=0.25, max_wheel_speed_rad_s=50.0),
+        dynamics=DynamicsSpec(mass_kg=20.0, motor=motor),
+    )
+    dyn = Dynamics([rob], FloorFriction(1.0), 4, 2)
+    pose, top = np.zeros((1, 3)), []
+    for _ in range(1500):
+        out = dyn.step(
+            pose, np.array([[40.0, 40.0, 0, 0]]), np.zeros(1), np.zeros(1, bool), 0.02, 0
+        )
+        pose = integrate_se2(pose, out.twist, 0.02)
+        top.append(dyn.phi[0, 0])
+        if len(top) == 1:
+            assert out.torque_nm[0, 0] == pytest.approx(5.0)  # G T_max while G phi < w0 / 2
+    assert max(top) <= 10.0 + 1e-9
+    assert top[-1] == pytest.approx(10.0, abs=1e-3)
+    assert dyn.vel[0, 0] == pytest.approx(1.0, abs=1e-3)
