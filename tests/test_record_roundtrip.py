@@ -172,6 +172,7 @@ def test_joint_states_are_the_wheel_angles_and_speeds(recorded):
             if wheels is not None:
                 assert list(m.name) == [f"{name}/{w}_wheel" for w in wheels]
             assert n == len(m.position) == len(m.velocity) and len(m.effort) == 0
+            assert m.header.frame_id == f"{name}/base_link"
             np.testing.assert_array_equal(m.position, snaps[k]["wheel_angles"][i, :n])
             np.testing.assert_array_equal(m.velocity, snaps[k]["wheel_speeds"][i, :n])
     # robot a turns both wheels forward on its constant twist: the angles grow

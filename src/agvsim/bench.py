@@ -158,6 +158,10 @@ def run_benchmarks(quick: bool = False, log: Callable[[str], object] | None = No
         out["fleet"][str(n)] = steps_per_second(n, steps)
     say("camera frames/s (320 x 240, one thread) ...")
     out["camera"] = camera_benchmark(quick)
+    say("planar dynamics against kinematics, 1000 robots ...")
+    from agvsim.bench_dynamics import dynamics_benchmark
+
+    out["dynamics"] = dynamics_benchmark(quick)
     return out
 
 

@@ -159,6 +159,8 @@ def _run(
             write_summary(out / "summary.json", data)
             if plot:
                 _plot(sim, trail, out / "plot.png", sc.name)
+                if sim.dynamics is not None:  # wheel torque and slip (agvsim.dynamics)
+                    _plot_wheels(sim, out, sc.name)
     return data
 
 
@@ -219,3 +221,10 @@ def _plot(sim: Simulation, trail: dict[str, list], path: Path, title: str) -> No
 
     xy = {k: np.array(v).reshape(-1, 2) for k, v in trail.items()}
     plot_run(sim, xy, path, f"{title} (t = {sim.state.t_s:.1f} s)")
+
+
+def _plot_wheels(sim: Simulation, out: Path, title: str) -> None:
+    from agvsim.viz.wheels_plot import plot_wheels
+
+    robots = {r.name: list(r.model.wheel_names) for r in sim.robots if r.dynamics is not None}
+    plot_wheels(out / "trajectory.csv", out / "wheels.png", robots, title)

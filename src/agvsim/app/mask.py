@@ -19,6 +19,7 @@ import yaml
 
 from agvsim.kinematics import MODELS
 from agvsim.scenario import default_camera_height
+from agvsim.scenario_dynamics import DynamicsConfig
 from agvsim.scenario_schema import ControllerConfig
 
 Kind = Literal["text", "number", "int", "dropdown", "checkbox", "yaml"]
@@ -70,6 +71,32 @@ SENSOR_FIELDS = {
         ("noise_std", "noise std (0..255)", "number", 0.0),
     ],
 }
+
+
+# the dynamics block's main values (agvsim.dynamics); the rest stays as the file has it
+DYNAMICS_FIELDS = [
+    ("mass_kg", "mass (kg)"),
+    ("load.mass_kg", "load (kg)"),
+    ("motor.torque_max_nm", "motor torque limit (N m)"),
+    ("motor.gear_ratio", "gear ratio"),
+    ("motor.time_constant_s", "speed controller time constant (s)"),
+    ("slip_speed_m_s", "tyre slip speed (m/s)"),
+]
+
+
+def _dyn_default(key: str) -> Any:
+    obj: Any = DynamicsConfig()
+    for part in key.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def _dyn_get(block: dict, key: str) -> Any:
+    for part in key.split("."):
+        if not isinstance(block, dict) or part not in block:
+            return None
+        block = block[part]
+    return block
 
 
 def _default(robot: dict, key: str, default: Any) -> Any:
@@ -136,6 +163,19 @@ def mask_fields(robot: dict, allow_python: bool = False) -> list[Field]:
         for key, label, fk, default in items:
             v = _default(robot, key, default) if s is None or s.get(key) is None else s[key]
             out.append(Field(f"sensors.{kind}.{key}", f"{kind} {label}", fk, v))
+    dyn = robot.get("dynamics")
+    out.append(
+        Field(
+            "dynamics",
+            "dynamics on",
+            "checkbox",
+            dyn is not None,
+            hint="mass, motors, friction and wheel slip (docs/dynamics.md)",
+        )  # fmt: skip
+    )
+    for key, label in DYNAMICS_FIELDS:
+        v = _dyn_get(dyn or {}, key)
+        out.append(Field(f"dynamics.{key}", label, "number", _dyn_default(key) if v is None else v))
     ctrl = dict(robot.get("controller", {"type": "idle"}))
     ctype = ctrl.pop("type", "idle")
     out.append(
@@ -204,6 +244,8 @@ def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
                 s[key] = int(round(v)) if fk == "int" else v
         sensors.append(s)
     out["sensors"] = sensors
+    if "dynamics" in values:
+        _dynamics_from_mask(out, robot, values)
     if "controller.type" in values or "controller.settings" in values:
         ctype = values.get("controller.type", robot.get("controller", {}).get("type", "idle"))
         text = values.get("controller.settings", "") or ""
@@ -218,3 +260,22 @@ def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
         settings.pop("type", None)
         out["controller"] = {"type": ctype, **settings}
     return out
+
+
+def _dynamics_from_mask(out: dict, robot: dict, values: dict[str, Any]) -> None:
+    """The dynamics checkbox and fields into ``out``; keys the entry leaves unset stay unset
+    while the panel shows their default."""
+    if not values["dynamics"]:
+        out.pop("dynamics", None)
+        return
+    block = copy.deepcopy(robot.get("dynamics") or {})
+    for key, _label in DYNAMICS_FIELDS:
+        v = values.get(f"dynamics.{key}")
+        if v is None or (_dyn_get(block, key) is None and v == _dyn_default(key)):
+            continue
+        *path, last = key.split(".")
+        sub = block
+        for part in path:
+            sub = sub.setdefault(part, {})
+        sub[last] = v
+    out["dynamics"] = block

@@ -22,15 +22,18 @@ from agvsim.dynamics import kernel as K
 from agvsim.dynamics.spec import G_M_S2
 
 
-def braking_deceleration_m_s2(body: np.ndarray, wheel: np.ndarray, mu: np.ndarray) -> float:
-    """Deceleration limit (m/s^2) of a straight forward stop, from one robot's rows of the
-    dynamics tables (``body`` (NB,), ``wheel`` (W, NWC)) and the friction ``mu`` (W,) under
-    each wheel. Passive wheels roll freely and do not brake.
+def braking_deceleration_m_s2(
+    body: np.ndarray, wheel: np.ndarray, mu: np.ndarray, direction_rad: float = 0.0
+) -> float:
+    """Deceleration limit (m/s^2) of a straight stop while moving in ``direction_rad`` (robot
+    frame: 0 forward, pi/2 a strafe to the left), from one robot's rows of the dynamics
+    tables (``body`` (NB,), ``wheel`` (W, NWC)) and the friction ``mu`` (W,) under each wheel.
+    Passive wheels roll freely and do not brake; the side forces of a symmetric robot cancel.
 
     A wheel whose motor gives first still has to stop its own spin, so it pushes the body
-    back with (G T_max - J a g_i / r) g_i / r, where g_i = |cos(beta_i + gamma_i)| /
-    |cos gamma_i| is its spin per unit of forward speed (times r); one whose friction gives
-    first pushes back with mu_i N_i |cos(beta_i + gamma_i)|. Which wheels are which is found by
+    back with (G T_max - J a g_i / r) g_i / r, where g_i = |cos(beta_i + gamma_i - psi)| /
+    |cos gamma_i| is its spin per unit of speed (times r); one whose friction gives first
+    pushes back with mu_i N_i |cos(beta_i + gamma_i - psi)|. Which wheels are which is found by
     a fixed point (at most W rounds)."""
     nw = int(body[K.B_NW])
     torque = body[K.B_TMAX] * body[K.B_GEAR]
@@ -40,7 +43,7 @@ def braking_deceleration_m_s2(body: np.ndarray, wheel: np.ndarray, mu: np.ndarra
         wi = wheel[i]
         if wi[K.W_DRIVEN] < 0.5:
             continue
-        x = abs(math.cos(wi[K.W_BETA] + wi[K.W_GAMMA]))
+        x = abs(math.cos(wi[K.W_BETA] + wi[K.W_GAMMA] - direction_rad))
         ea = abs(math.cos(wi[K.W_GAMMA]))
         if x < 1e-12 or ea < 1e-12:
             continue
@@ -89,7 +92,10 @@ class Stop:
     t_s: float  # when braking began
     speed_m_s: float  # speed then
     pose: np.ndarray  # (3,) pose then
+    direction_rad: float  # direction of travel then (robot frame)
     distance_m: float = 0.0
+    deceleration_m_s2: float = math.nan  # closed-form limit then (as loaded, on that floor)
+    mu: float = math.nan  # lowest friction under its wheels then
 
 
 class BrakeMonitor:
@@ -101,6 +107,7 @@ class BrakeMonitor:
         self.min_speed, self.rest_speed = min_speed_m_s, rest_speed_m_s
         self.active: list[Stop | None] = [None] * n
         self._on = np.zeros(n, dtype=bool)
+        self.started: list[int] = []  # rows whose stop began in the last update
         self.events: list[list[Stop]] = [[] for _ in range(n)]
 
     def update(
@@ -112,16 +119,23 @@ class BrakeMonitor:
         speed_before: np.ndarray,
         speed_after: np.ndarray,
         braking: np.ndarray,
+        velocity: np.ndarray,
     ) -> None:
+        """One step: ``poses`` (D, 3) at its start, ``twist`` (D, 3) over it, speeds at its
+        start and end, ``braking`` (D,) all driven wheels commanded to zero, ``velocity``
+        (D, 3) at its start."""
         starting = braking & (speed_before > self.min_speed)
+        self.started = []
         for d in np.flatnonzero(starting | self._on):
             stop = self.active[d]
             if not braking[d]:
                 self.active[d], self._on[d] = None, False
                 continue
             if stop is None:
-                stop = Stop(t_s, float(speed_before[d]), poses[d].copy())
+                psi = math.atan2(velocity[d, 1], velocity[d, 0])
+                stop = Stop(t_s, float(speed_before[d]), poses[d].copy(), psi)
                 self.active[d], self._on[d] = stop, True
+                self.started.append(int(d))
             stop.distance_m += float(math.hypot(twist[d, 0], twist[d, 1])) * dt
             if speed_after[d] < self.rest_speed:
                 self.events[d].append(stop)

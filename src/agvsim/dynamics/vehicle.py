@@ -10,6 +10,7 @@ per wheel.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -17,7 +18,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from agvsim.dynamics import kernel as K
-from agvsim.dynamics.braking import BrakeMonitor, braking_deceleration_m_s2
+from agvsim.dynamics.braking import (
+    BrakeMonitor,
+    braking_deceleration_m_s2,
+    stopping_distance_m,
+)
 from agvsim.dynamics.spec import G_M_S2, FloorFriction, FrictionModel, LoadSpec
 
 if TYPE_CHECKING:
@@ -200,12 +205,23 @@ class Dynamics:
     def mass_kg(self) -> np.ndarray:
         return self.body[:, K.B_MASS].copy()
 
-    def braking_deceleration_m_s2(self, robot_index: int, mu: float | None = None) -> float:
-        """Straight-line braking limit of a robot as loaded now (see ``braking``); ``mu``
-        defaults to the floor's."""
+    def braking_deceleration_m_s2(
+        self, robot_index: int, mu: float | None = None, direction_rad: float = 0.0
+    ) -> float:
+        """Straight-line braking limit of a robot as loaded now, moving in ``direction_rad``
+        (robot frame; see ``braking``); ``mu`` defaults to the floor's."""
         d = self.row(robot_index)
         mu_w = np.full(int(self.body[d, K.B_NW]), self.floor.mu if mu is None else mu)
-        return braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w)
+        return braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w, direction_rad)
+
+    def stopping_distance_m(
+        self, robot_index: int, speed_m_s: float, mu: float | None = None,
+        reaction_time_s: float = 0.0, direction_rad: float = 0.0,
+    ) -> float:  # fmt: skip
+        """Closed-form stopping distance of a robot as loaded now (the safety-field hook):
+        ``speed_m_s`` t_react + v^2 / (2 a_max)."""
+        a = self.braking_deceleration_m_s2(robot_index, mu, direction_rad)
+        return stopping_distance_m(speed_m_s, a, reaction_time_s)
 
     def reset(self, steering: np.ndarray) -> None:
         n, w = self.wheel.shape[:2]
@@ -215,6 +231,7 @@ class Dynamics:
         self.delta_rate = np.zeros(n)
         self.energy_j = np.zeros((n, w))  # motor work since reset
         self.brakes = BrakeMonitor(n)
+        self.last_substeps = np.zeros(n, dtype=np.int64)
         for d, r in enumerate(self.robots):
             if self.loads[d] != r.dynamics.load:  # type: ignore[union-attr]
                 self._fill(d, r, None)
@@ -240,7 +257,8 @@ class Dynamics:
         slip = np.zeros((n, w))
         work = np.zeros((n, w))
         nsub = np.zeros(n, dtype=np.int64)
-        speed0 = np.hypot(self.vel[:, 0], self.vel[:, 1])
+        vel0 = self.vel.copy()
+        speed0 = np.hypot(vel0[:, 0], vel0[:, 1])
         K.step_robots(
             float(dt),
             np.ascontiguousarray(poses),
@@ -264,17 +282,33 @@ class Dynamics:
             nsub,
         )
         self.energy_j += work
+        self.last_substeps = nsub
         steer_angles = np.where(
             self._has_steer_col, np.take_along_axis(steer, self._steer_take, axis=1), 0.0
         )
         driven = self.wheel[:, :, K.W_DRIVEN] > 0.5
         braking = ~np.any(driven & (np.abs(targets) > 1e-12), axis=1)
         self.brakes.update(
-            t_s, poses, twist, dt, speed0, np.hypot(self.vel[:, 0], self.vel[:, 1]), braking
+            t_s, poses, twist, dt, speed0, np.hypot(self.vel[:, 0], self.vel[:, 1]), braking, vel0
         )
+        for d in self.brakes.started:  # the closed form as loaded and on the floor now
+            stop = self.brakes.active[d]
+            assert stop is not None
+            mu_w = self._mu_under(d, stop.pose)
+            stop.mu = float(mu_w.min())
+            stop.deceleration_m_s2 = braking_deceleration_m_s2(
+                self.body[d], self.wheel[d], mu_w, stop.direction_rad
+            )
         return DynamicsStep(
             twist, angle / dt, self.delta.copy(), steer_angles, torque, slip, work / dt, nsub
         )
+
+    def _mu_under(self, d: int, pose: np.ndarray) -> np.ndarray:
+        """Friction under each wheel of row d at a world pose."""
+        nw = int(self.body[d, K.B_NW])
+        px, py = self.wheel[d, :nw, K.W_PX], self.wheel[d, :nw, K.W_PY]
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        return self.floor.mu_at(pose[0] + c * px - s * py, pose[1] + s * px + c * py)
 
     def summary(self) -> list[dict]:
         """Per dynamic robot: mass, energy per wheel and the braking events measured against
@@ -283,20 +317,16 @@ class Dynamics:
         for d, r in enumerate(self.robots):
             events = []
             for ev in self.brakes.events[d]:
-                nw = int(self.body[d, K.B_NW])
-                px, py = self.wheel[d, :nw, K.W_PX], self.wheel[d, :nw, K.W_PY]
-                c, s = np.cos(ev.pose[2]), np.sin(ev.pose[2])
-                mu_w = self.floor.mu_at(ev.pose[0] + c * px - s * py, ev.pose[1] + s * px + c * py)
-                a = braking_deceleration_m_s2(self.body[d], self.wheel[d], mu_w)
-                predicted = ev.speed_m_s**2 / (2.0 * a)
+                predicted = ev.speed_m_s**2 / (2.0 * ev.deceleration_m_s2)
                 events.append(
                     {
                         "t_start_s": round(ev.t_s, 6),
                         "speed_m_s": round(ev.speed_m_s, 6),
+                        "direction_deg": round(math.degrees(ev.direction_rad), 3),
                         "distance_m": round(ev.distance_m, 6),
                         "closed_form_m": round(float(predicted), 6),
-                        "deceleration_limit_m_s2": round(float(a), 6),
-                        "mu": round(float(mu_w.min()), 6),
+                        "deceleration_limit_m_s2": round(ev.deceleration_m_s2, 6),
+                        "mu": round(ev.mu, 6),
                     }
                 )
             out.append(

@@ -29,6 +29,8 @@ topic                           type                         when
 /<robot>/<camera>/image/...     sensor_msgs/CompressedImage  every camera frame (JPEG)
 /<robot>/<camera>/camera_info   sensor_msgs/CameraInfo       with every frame (its intrinsics K)
 /<robot>/slam/map               nav_msgs/OccupancyGrid       ``write_slam_map`` (online SLAM)
+/<robot>/wheel_slip             std_msgs/Float64MultiArray   pose rate, robots with dynamics:
+                                                             slip speed of each wheel (m/s)
 ==============================  ===========================  ==================================
 
 Message times (log, publish and header stamps) are the simulated time, from 0. The file is
@@ -142,6 +144,8 @@ class Recorder:
         pairs = []
         for rt in self.robot_topics:
             pairs += [("map", f"{rt}/odom"), (f"{rt}/odom", f"{rt}/base_link")]
+        dyn = sim.dynamics
+        self._wheel_rows = [] if dyn is None else [int(i) for i in dyn.idx]
         self._tf = msg.TfEncoder(pairs)
         self._joint_channels = [self._channel(f"/{rt}/joint_states", msg.JOINT_STATE)
                                 for rt in self.robot_topics]  # fmt: skip
@@ -250,11 +254,12 @@ class Recorder:
         torque = st.wheel_torque_nm
         for i, r in enumerate(self.sim.robots):
             w, k = len(r.model.wheel_names), len(r.model.steered_wheels)
-            effort = None
+            effort: list[float] = []  # unknown without dynamics: empty, as ROS allows
             if r.dynamics is not None and torque.shape[0] == self.sim.n:
                 effort = torque[i, :w].tolist() + [0.0] * k
             data = msg.encode_joint_state(
                 t_ns,
+                f"{self.robot_topics[i]}/base_link",
                 self._joint_names[i],
                 st.wheel_angles[i, :w].tolist() + steer[i, :k].tolist(),
                 st.wheel_speeds[i, :w].tolist() + steer_rate[i, :k].tolist(),
@@ -278,6 +283,7 @@ class Recorder:
         if t_s >= self._next_pose_s - 1e-9:
             self._write_poses(t_s, t_ns)
             self._write_joints(t_s, t_ns)
+            self._write_slip(t_ns)
             self._next_pose_s = t_s + self.pose_period_s
         self._write_scans(t_ns)
         if self._camera_seq:
@@ -319,6 +325,14 @@ class Recorder:
             write(c_gt, t_ns, e_gt.encode(t_ns, gt_l[i], tw_l[i]))
             write(c_odo, t_ns, e_odo.encode(t_ns, odo_l[i], otw_l[i]))
         write(self._tf_channel, t_ns, self._tf.encode(t_ns, tf))
+
+    def _write_slip(self, t_ns: int) -> None:
+        """The slip speed of each wheel (m/s) of the robots with dynamics."""
+        st = self.sim.state
+        for i in self._wheel_rows:
+            rt, n = self.robot_topics[i], len(self.sim.robots[i].model.wheel_names)
+            slip = msg.encode_float64_multi_array("wheel", st.wheel_slip_m_s[i, :n].tolist())
+            self._write(f"/{rt}/wheel_slip", msg.FLOAT64_MULTI_ARRAY, t_ns, slip)
 
     def _write_scans(self, t_ns: int) -> None:
         st, tab = self.sim.state, self.sim.sensors

@@ -21,6 +21,11 @@ COLUMNS = (
     + [f"wheel{k + 1}_rad_s" for k in range(W_MAX)]
     + ["steering_rad", "odom_x", "odom_y", "odom_theta", "bump", "state"]
 )
+# appended only when a robot has dynamics (agvsim.dynamics): per wheel, empty for kinematic
+# robots and unused wheels
+DYNAMICS_COLUMNS = [
+    f"wheel{k + 1}_{q}" for q in ("torque_nm", "slip_m_s", "power_w") for k in range(W_MAX)
+]
 
 
 class TrajectoryWriter:
@@ -32,9 +37,11 @@ class TrajectoryWriter:
             raise ValueError(f"record_every: {every!r} is not allowed (an integer >= 1)")
         self.path, self.sim, self.every = Path(path), sim, every
         self._f = self.path.open("w", encoding="utf-8", newline="")
-        self._f.write(",".join(COLUMNS) + "\n")
+        self._dyn = sim.dynamics is not None
+        self._f.write(",".join(COLUMNS + (DYNAMICS_COLUMNS if self._dyn else [])) + "\n")
         self._names = [r.name for r in sim.robots]
         self._nw = [len(r.model.wheel_names) for r in sim.robots]
+        self._has_dyn = [r.dynamics is not None for r in sim.robots]
         self._last_flush = time.monotonic()
         self.rows = 0
 
@@ -48,17 +55,27 @@ class TrajectoryWriter:
             w = st.wheel_speeds[i]
             wheels = [f"{w[k]:.6g}" if k < self._nw[i] else "" for k in range(W_MAX)]
             p, v, o = st.poses[i], st.twists[i], st.odom_poses[i]
-            lines.append(
+            line = (
                 f"{st.t_s:.4f},{name},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},"
                 f"{v[0]:.6g},{v[1]:.6g},{v[2]:.6g},{','.join(wheels)},{st.steering[i]:.6g},"
-                f"{o[0]:.6f},{o[1]:.6f},{o[2]:.6f},{int(st.bump[i])},{states[i]}\n"
+                f"{o[0]:.6f},{o[1]:.6f},{o[2]:.6f},{int(st.bump[i])},{states[i]}"
             )
+            if self._dyn:
+                line += "," + self._dynamics_cells(i)
+            lines.append(line + "\n")
         self._f.write("".join(lines))
         self.rows += len(lines)
         now = time.monotonic()
         if now - self._last_flush > 1.0:
             self._f.flush()
             self._last_flush = now
+
+    def _dynamics_cells(self, i: int) -> str:
+        st, n = self.sim.state, self._nw[i] if self._has_dyn[i] else 0
+        cells = []
+        for arr in (st.wheel_torque_nm, st.wheel_slip_m_s, st.wheel_power_w):
+            cells += [f"{arr[i, k]:.6g}" if k < n else "" for k in range(W_MAX)]
+        return ",".join(cells)
 
     def close(self) -> None:
         if not self._f.closed:
@@ -104,7 +121,10 @@ def summary(sim: Simulation, wall_s: float, extra: dict[str, Any] | None = None)
     }
     if extra:
         run.update(extra)
-    return {"run": run, "robots": robots}
+    out: dict[str, Any] = {"run": run, "robots": robots}
+    if sim.dynamics is not None:  # mass, motor energy, stops against the closed form
+        out["dynamics"] = sim.dynamics.summary()
+    return out
 
 
 def write_summary(path: Path, data: dict) -> None:

@@ -81,6 +81,9 @@ _DEFS: dict[str, str] = {
         "visualization_msgs/MeshFile mesh_file\nbool mesh_use_embedded_materials\n"
     ),
     "visualization_msgs/MarkerArray": "visualization_msgs/Marker[] markers\n",
+    "std_msgs/MultiArrayDimension": "string label\nuint32 size\nuint32 stride\n",
+    "std_msgs/MultiArrayLayout": "std_msgs/MultiArrayDimension[] dim\nuint32 data_offset\n",
+    "std_msgs/Float64MultiArray": "std_msgs/MultiArrayLayout layout\nfloat64[] data\n",
 }
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -92,17 +95,11 @@ CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 STRING = "std_msgs/msg/String"
 JOINT_STATE = "sensor_msgs/msg/JointState"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 TYPES = (
-    TF_MESSAGE,
-    ODOMETRY,
-    LASER_SCAN,
-    OCCUPANCY_GRID,
-    COMPRESSED_IMAGE,
-    CAMERA_INFO,
-    STRING,
-    JOINT_STATE,
-    MARKER_ARRAY,
-)
+    TF_MESSAGE, ODOMETRY, LASER_SCAN, OCCUPANCY_GRID, COMPRESSED_IMAGE, CAMERA_INFO, STRING,
+    JOINT_STATE, MARKER_ARRAY, FLOAT64_MULTI_ARRAY,
+)  # fmt: skip
 
 _SEP = "=" * 80 + "\n"
 _BAD = re.compile(r"[^A-Za-z0-9_]")
@@ -251,6 +248,41 @@ def encode_tf_3d(t_ns: int, transforms: list[Transform3D]) -> bytes:
     return c.bytes()
 
 
+def encode_joint_state(
+    t_ns: int,
+    frame_id: str,
+    names: list[str],
+    position: list[float],
+    velocity: list[float],
+    effort: list[float],
+) -> bytes:
+    """``sensor_msgs/JointState``: one entry per joint (rad, rad/s, N m)."""
+    c = Cdr()
+    c.header(t_ns, frame_id)
+    c.u32(len(names))
+    for n in names:
+        c.string(n)
+    for values in (position, velocity, effort):
+        c.u32(len(values))
+        if values:
+            c.f64(*values)
+    return c.bytes()
+
+
+def encode_float64_multi_array(label: str, values: list[float]) -> bytes:
+    """``std_msgs/Float64MultiArray`` with one dimension named ``label``."""
+    c = Cdr()
+    c.u32(1)
+    c.string(label)
+    c.u32(len(values))
+    c.u32(1)
+    c.u32(0)  # data_offset
+    c.u32(len(values))
+    if values:
+        c.f64(*values)
+    return c.bytes()
+
+
 def encode_odometry(
     t_ns: int,
     frame_id: str,
@@ -348,28 +380,6 @@ def encode_camera_info(
     for v in (0, 0, 0, 0, 0, 0):  # binning_x, binning_y, roi x_offset, y_offset, height, width
         c.u32(v)
     c.buf += b"\x00"  # roi.do_rectify = false
-    return c.bytes()
-
-
-def encode_joint_state(
-    t_ns: int,
-    names: list[str],
-    position: list[float],
-    velocity: list[float],
-    effort: list[float] | None = None,
-) -> bytes:
-    """``sensor_msgs/JointState`` with an empty frame (joint states name their joints);
-    ``effort`` empty when ``None`` (the joints' torques are not known)."""
-    n = len(names)
-    if len(position) != n or len(velocity) != n or (effort is not None and len(effort) != n):
-        raise ValueError(f"JointState: {n} names need as many positions, velocities, efforts")
-    c = Cdr()
-    c.header(t_ns, "")
-    c.u32(n)
-    for name in names:
-        c.string(name)
-    for values in (position, velocity, effort or []):
-        c.seq(struct.pack(f"<{len(values)}d", *values), len(values), 8)
     return c.bytes()
 
 
