@@ -240,7 +240,13 @@ def validate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file."
     from agvsim.scenario import ScenarioError, build, load_scenario
 
     try:
-        build(load_scenario(scenario))
+        sc = load_scenario(scenario)
+        if sc.vda5050 is None:
+            build(sc)
+        else:  # vehicles start on layout nodes
+            from agvsim.fleet.build import build_fleet
+
+            build_fleet(sc)
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None

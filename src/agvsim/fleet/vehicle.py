@@ -36,7 +36,14 @@ from agvsim.sim.spec import RobotSpec
 from agvsim.world.lif import Layout
 
 MAX_ERRORS = 20
+MIN_TOLERANCE_M = 0.05  # a stop node is reached within max(this, allowedDeviationXY)
+MIN_TOLERANCE_RAD = 0.02
 MAX_INSTANT_STATES = 50
+
+
+def _reach(node: OrderNode) -> float:
+    """How close to a stop node counts as there (m)."""
+    return max(MIN_TOLERANCE_M, node.dev_xy_m)
 
 
 @dataclass(frozen=True)
@@ -391,7 +398,7 @@ class Vehicle:
             k = next((j for j, n in enumerate(targets) if n is self.leg.nodes[-1]), None)
             if k is not None and len(t_edges) > k:
                 self.leg.extend(
-                    targets[k:], t_edges[k:], self._speeds(t_edges[k:]), targets[-1].dev_xy_m
+                    targets[k:], t_edges[k:], self._speeds(t_edges[k:]), _reach(targets[-1])
                 )
 
     def _on_instant(self, payload: Any) -> None:
@@ -601,7 +608,7 @@ class Vehicle:
         if self.leg is None:
             nodes, edges = self._leg_targets()
             self.leg = Leg(
-                nodes, edges, self._speeds(edges), self.cfg.lookahead_m, nodes[-1].dev_xy_m
+                nodes, edges, self._speeds(edges), self.cfg.lookahead_m, _reach(nodes[-1])
             )
         leg = self.leg
         tw = leg.twist(self.pose, self.mob)
@@ -618,7 +625,7 @@ class Vehicle:
                 break
             if n.theta is not None and (self.mob.can_spin or self.mob.holonomic):
                 err = wrap(n.theta - float(self.pose[2]))
-                if abs(err) > n.dev_theta_rad:
+                if abs(err) > max(MIN_TOLERANCE_RAD, n.dev_theta_rad):
                     return 0.0, 0.0, max(-1.0, min(1.0, 2.0 * err))
             self.leg = None
             self._traverse(n)
@@ -655,6 +662,13 @@ class Vehicle:
         if self.cfg.vis_period_s > 0 and t >= self._next_vis_s - 1e-9:
             self.outbox.append(("visualization", self.visualization(), False))
             self._next_vis_s = t + self.cfg.vis_period_s
+
+    def fault(self, exc: BaseException) -> None:
+        """A failure inside the vehicle's own code: it stops, reports it, and stays up."""
+        if not any(e[0] == "fault" for e in self.errors):
+            self._error("fault", Problem.INTERNAL, f"{type(exc).__name__}: {exc}", {})
+        self.twist, self.driving, self.leg = (0.0, 0.0, 0.0), False, None
+        self._publish_due()
 
     def drain(self) -> list[tuple[str, dict, bool]]:
         out, self.outbox = self.outbox, []
