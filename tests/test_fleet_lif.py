@@ -99,8 +99,8 @@ def test_schema_errors_name_the_json_path() -> None:
         parse_lif(doc, "hall.json")
     text = str(e.value)
     assert "hall.json" in text
-    assert "layouts[0].nodes[1]: 'nodePosition' is a required property" in text
-    assert "layouts[0].edges[0].vehicleTypeEdgeProperties[0].rotationAllowed: 'yes'" in text
+    assert 'layouts[0].nodes[1]: "nodePosition" is a required property' in text
+    assert 'layouts[0].edges[0].vehicleTypeEdgeProperties[0].rotationAllowed: "yes"' in text
 
 
 def test_graph_errors_beyond_the_schema() -> None:

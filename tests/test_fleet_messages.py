@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from test_fleet_vehicle import ROW4, make, statuses
 
 from agvsim.fleet.messages import kinematic_kind
-from agvsim.fleet.schemas import VERSIONS, problems, schema
+from agvsim.fleet.schemas import VERSIONS, problems, reference_problems, schema
 from agvsim.kinematics import MODELS
 
 MODELS_ALL = list(MODELS)
@@ -234,3 +234,21 @@ def test_a_fault_in_one_vehicle_stops_only_it(tmp_path: Path, monkeypatch) -> No
     assert s["errors"][0]["errorType"] == "internalError"
     assert "ZeroDivisionError" in s["errors"][0]["errorDescription"]
     assert np.allclose(r.pose("agv1"), (-3.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_the_reference_validator_agrees(tmp_path: Path, version: str) -> None:
+    """Every kind of message a vehicle sends passes python-jsonschema too, and broken copies
+    fail both validators."""
+    r = make(tmp_path, version=version)
+    acts = {"r4c3": [action("pk", "pick", "HARD")]}
+    r.v().receive("order", order(r.fleet.layout, ROW4[:3], node_actions=acts, version=version))
+    r.step(120)
+    sent = r.sent["agv1"] + [("connection", r.v().connection("ONLINE"))]
+    kinds = {t for t, _ in sent}
+    assert kinds == {"state", "visualization", "factsheet", "connection"}
+    for topic, msg in sent:
+        assert reference_problems(version, topic, msg) == [], topic
+        broken = dict(msg)
+        broken["headerId"] = "one"
+        assert problems(version, topic, broken) and reference_problems(version, topic, broken)

@@ -312,10 +312,18 @@ def bench(
         bool,
         typer.Option("--app", help="Only the browser app: 10 robots, 240-beam lidars, frames/s."),
     ] = False,
+    fleet_only: Annotated[
+        bool,
+        typer.Option("--fleet", help="Only the VDA 5050 fleet on MQTT (docs/fleet.md)."),
+    ] = False,
 ) -> None:
     """Measure ray-casting throughput, steps/s and real-time factor for 1, 100, 1000 robots
     (or, with --app, the browser app's frame rate)."""
-    if app_only:
+    if fleet_only:
+        from agvsim.fleet.bench import fleet_benchmark
+
+        result = fleet_benchmark(quick=quick, log=None if as_json else err.print)
+    elif app_only:
         from agvsim.bench_app import run_app_benchmark
 
         result = run_app_benchmark(
