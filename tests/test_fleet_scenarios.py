@@ -90,3 +90,21 @@ def test_thesis_maze_models_follow_routes(serial: str, goal: str) -> None:
     r.step()
     r.until(lambda: v.last_node.node_id == goal and not v.route_nodes, 120, goal)
     assert f.sim.state.wall_collisions.sum() == 0
+
+
+def test_the_fleet_page_examples_run() -> None:
+    """Every ```python block of docs/fleet.md runs as written from the repository root."""
+    import os
+    import re
+
+    root = SCENARIOS.parent
+    text = (root / "docs" / "fleet.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"^```python\n(.*?)^```", text, re.S | re.M)
+    assert blocks
+    here = Path.cwd()
+    os.chdir(root)
+    try:
+        for code in blocks:
+            exec(compile(code, "docs/fleet.md", "exec"), {})
+    finally:
+        os.chdir(here)
