@@ -154,13 +154,14 @@ class MqttTransport:
         pending, self._pending = self._pending, set()
         for link in pending:
             c = link.client
-            if c.socket() is None:
+            sock = c.socket()
+            if sock is None:
                 continue
             c.loop_write()
             if c.want_write() and link not in self._writable:
                 self._writable.add(link)
                 try:
-                    self.sel.modify(c.socket(), selectors.EVENT_READ | selectors.EVENT_WRITE, link)
+                    self.sel.modify(sock, selectors.EVENT_READ | selectors.EVENT_WRITE, link)
                 except (KeyError, ValueError):
                     pass
 
