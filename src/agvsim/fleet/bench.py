@@ -280,8 +280,8 @@ def fleet_benchmark(quick: bool = False, log: Callable[[str], object] | None = N
         ["mosquitto"] if shutil.which("mosquitto") or Path("/usr/sbin/mosquitto").exists() else []
     )
     sizes = {
-        "embedded": [50, 200] if quick else [50, 100, 200, 400],
-        "mosquitto": [200, 1000] if quick else [200, 500, 1000, 1500],
+        "embedded": [100, 200] if quick else [100, 200, 300, 400],
+        "mosquitto": [200, 400] if quick else [200, 400, 600, 1000],
     }
     seconds = 10.0 if quick else 20.0
     out: dict = {
@@ -293,7 +293,7 @@ def fleet_benchmark(quick: bool = False, log: Callable[[str], object] | None = N
         for n in sizes[b]:
             say(f"{b}: {n} vehicles, {seconds:g} simulated s unpaced ...")
             out[b]["unpaced"].append(run_one(n, b, seconds))
-        n_lat = 100 if b == "embedded" else 500
+        n_lat = 100 if b == "embedded" else 300
         say(f"{b}: latency with {n_lat} vehicles paced to real time ...")
         out[b]["paced"].append(run_latency(n_lat, b, 10.0 if quick else 20.0))
     return out
