@@ -99,8 +99,8 @@ def test_schema_errors_name_the_json_path() -> None:
         parse_lif(doc, "hall.json")
     text = str(e.value)
     assert "hall.json" in text
-    assert "layouts[0].nodes[1]: 'nodePosition' is a required property" in text
-    assert "layouts[0].edges[0].vehicleTypeEdgeProperties[0].rotationAllowed: 'yes'" in text
+    assert 'layouts[0].nodes[1]: "nodePosition" is a required property' in text
+    assert 'layouts[0].edges[0].vehicleTypeEdgeProperties[0].rotationAllowed: "yes"' in text
 
 
 def test_graph_errors_beyond_the_schema() -> None:
@@ -224,3 +224,43 @@ def test_the_warehouse_layout_loads() -> None:
         if any(a["actionType"] == "startCharging" for p in n.types.values() for a in p.actions)
     ]
     assert len(chargers) >= 2
+
+
+def test_layout_geometry_for_the_app() -> None:
+    from agvsim.fleet.viz import draw_layout, layout_geometry
+
+    (lay,) = parse_lif(small_doc())
+    g = layout_geometry(lay)
+    # a-b and b-c are straight, one segment each, on the floor
+    np.testing.assert_allclose(g.segments[:, :, :2], [[[0, 0], [2, 0]], [[2, 0], [2, 2]]])
+    assert g.nodes.shape == (3, 3) and g.station_names == ("charger",)
+    np.testing.assert_allclose(g.stations[0, :2], (2.5, 2.0))
+    w = math.sqrt(2.0)  # (1, sqrt(1/2), 1) scaled by sqrt(2): LIF wants weights >= 1
+    doc = small_doc()
+    doc["layouts"][0]["edges"][1]["vehicleTypeEdgeProperties"][0]["trajectory"] = {
+        "degree": 2,
+        "knotVector": [0, 0, 0, 1, 1, 1],
+        "controlPoints": [
+            {"x": 2, "y": 0, "weight": w},
+            {"x": 4, "y": 0},
+            {"x": 4, "y": 2, "weight": w},
+        ],
+    }
+    (curved,) = parse_lif(doc)
+    g2 = layout_geometry(curved, samples=16)
+    assert len(g2.segments) == 1 + 16
+    arc = g2.segments[1:, 0, :2]  # a quarter circle of radius 2 about (2, 2)
+    np.testing.assert_allclose(np.hypot(arc[:, 0] - 2, arc[:, 1] - 2), 2.0, atol=1e-5)
+    calls = []
+
+    class Scene:
+        def __getattr__(self, name):
+            return lambda *a, **k: calls.append((name, a[0]))
+
+    draw_layout(Scene(), curved)
+    assert [c[0] for c in calls] == [
+        "add_line_segments",
+        "add_point_cloud",
+        "add_point_cloud",
+        "add_label",
+    ]

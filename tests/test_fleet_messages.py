@@ -4,14 +4,18 @@ kind of bad incoming message refused with the spec's error while the fleet carri
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fleet_helpers import action, instant, order
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from test_fleet_vehicle import ROW4, make, statuses
 
 from agvsim.fleet.messages import kinematic_kind
-from agvsim.fleet.schemas import VERSIONS, problems, schema
+from agvsim.fleet.schemas import VERSIONS, problems, reference_problems, schema
 from agvsim.kinematics import MODELS
 
 MODELS_ALL = list(MODELS)
@@ -145,3 +149,106 @@ def test_v3_error_names(tmp_path: Path) -> None:
     r.step()
     v.receive("order", order(lay, ROW4, order_id="o2", version="3.0.0"))
     assert _errors(r) == ["OTHER_ORDER_ACTIVE"]
+
+
+JSON = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-5, 10**12)
+    | st.floats(allow_nan=False)
+    | st.text(max_size=8),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
+    max_leaves=20,
+)
+
+
+@settings(
+    max_examples=int(os.environ.get("AGVSIM_FUZZ_EXAMPLES", "60")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+@given(data=st.data())
+def test_mutated_messages_never_crash_a_vehicle(tmp_path_factory, data) -> None:
+    r = make(tmp_path_factory.mktemp("fuzz"))
+    good = order(r.fleet.layout, ROW4, node_actions={"r4c3": [action("a", "pick", "SOFT")]})
+    good["edges"][1]["maxSpeed"] = 0.5
+    a, b = good["nodes"][2]["nodePosition"], good["nodes"][3]["nodePosition"]
+    good["edges"][2]["trajectory"] = {
+        "degree": 1,
+        "knotVector": [0, 0, 1, 1],
+        "controlPoints": [{"x": a["x"], "y": a["y"]}, {"x": b["x"], "y": b["y"], "weight": 1.0}],
+    }
+    good["nodes"][2]["nodePosition"] |= {"allowedDeviationXY": 0.2, "theta": 0.0}
+    msg = json.loads(json.dumps(good))
+    # change one field deep inside the order to any JSON value, or drop it
+    path = []
+    node: object = msg
+    while isinstance(node, dict | list) and node and data.draw(st.booleans()):
+        key = data.draw(
+            st.sampled_from(sorted(node) if isinstance(node, dict) else list(range(len(node))))
+        )
+        path.append(key)
+        node = node[key]
+    if path:
+        parent = msg
+        for k in path[:-1]:
+            parent = parent[k]
+        if data.draw(st.booleans()) and isinstance(parent, dict):
+            del parent[path[-1]]
+        else:
+            parent[path[-1]] = data.draw(JSON)
+    topic = data.draw(st.sampled_from(["order", "instantActions"]))
+    r.v().receive(topic, json.dumps(msg).encode())
+    r.step(30)  # Run validates every state it publishes
+    s = r.states()[-1]
+    assert s["errors"] or s["orderId"] == "o1"
+    assert not [e for e in s["errors"] if e["errorType"] == "internalError"], s["errors"]
+
+
+def test_zero_deviation_still_arrives(tmp_path: Path) -> None:
+    r = make(tmp_path)
+    o = order(r.fleet.layout, ROW4[:3])
+    o["nodes"][-1]["nodePosition"] |= {
+        "allowedDeviationXY": 0.0,
+        "allowedDeviationTheta": 0.0,
+        "theta": 1.0,
+    }
+    r.v().receive("order", o)
+    r.step()
+    r.until(lambda: not r.v().route_nodes, 20, "arrival")
+    assert abs(r.pose()[2] - 1.0) <= 0.02 + 1e-9
+
+
+def test_a_fault_in_one_vehicle_stops_only_it(tmp_path: Path, monkeypatch) -> None:
+    r = make(
+        tmp_path, [("agv1", "differential", "r4c1", 0.0), ("agv2", "differential", "r2c1", 0.0)]
+    )
+    lay = r.fleet.layout
+    monkeypatch.setattr(r.v("agv1"), "_drive", lambda: 1 / 0)
+    r.v("agv1").receive("order", order(lay, ROW4))
+    r.v("agv2").receive("order", order(lay, ["r2c1", "r2c2", "r2c3"], serial="agv2"))
+    r.until(lambda: r.v("agv2").last_node.node_id == "r2c3", 20, "agv2's order")
+    s = r.last_state("agv1")
+    assert s["errors"][0]["errorType"] == "internalError"
+    assert "ZeroDivisionError" in s["errors"][0]["errorDescription"]
+    assert np.allclose(r.pose("agv1"), (-3.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_the_reference_validator_agrees(tmp_path: Path, version: str) -> None:
+    """Every kind of message a vehicle sends passes python-jsonschema too, and broken copies
+    fail both validators."""
+    r = make(tmp_path, version=version)
+    acts = {"r4c3": [action("pk", "pick", "HARD")]}
+    r.v().receive("order", order(r.fleet.layout, ROW4[:3], node_actions=acts, version=version))
+    r.step(120)
+    sent = r.sent["agv1"] + [("connection", r.v().connection("ONLINE"))]
+    kinds = {t for t, _ in sent}
+    assert kinds == {"state", "visualization", "factsheet", "connection"}
+    for topic, msg in sent:
+        assert reference_problems(version, topic, msg) == [], topic
+        broken = dict(msg)
+        broken["headerId"] = "one"
+        assert problems(version, topic, broken) and reference_problems(version, topic, broken)

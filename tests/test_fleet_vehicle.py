@@ -148,8 +148,8 @@ def test_edge_actions_run_on_the_edge(tmp_path: Path) -> None:
     )
     r.until(lambda: r.v().last_node.node_id == "r4c2", 10, "r4c2")
     assert r.v().order_actions["scan"].status in ("WAITING", "RUNNING")
-    r.step()
-    assert r.v().order_actions["scan"].status == "RUNNING" and r.v().driving
+    r.until(lambda: r.v().order_actions["scan"].status == "RUNNING", 0.2, "the edge action")
+    assert r.v().driving
     r.until(lambda: r.v().last_node.node_id == "r4c3", 10, "r4c3")
     assert r.v().order_actions["scan"].status == "FINISHED"
 

@@ -1,6 +1,7 @@
 """Write scenarios/fleet_warehouse.lif.json and scenarios/fleet_warehouse.yaml: a 32 x 22 m
 hall with six racks, three roads joined by four aisles, rack stations on the roads, a charging
-lane with four chargers, and 20 vehicles of the five models parked on layout nodes.
+lane with four chargers, parking spurs off the outer roads, and 20 vehicles of the five models
+parked there (off the roads, facing them).
 
     python examples/fleet/make_warehouse.py
 """
@@ -19,6 +20,7 @@ TYPES = [f"agvsim.{m}" for m in ("differential", "tricycle", "ackermann", "mecan
 XS = list(range(-13, 14, 2))  # road node x positions (m)
 ROADS = {"A": 6.5, "B": 0.0, "C": -6.5}
 AISLES = {"V1": -13, "V2": -5, "V3": 5, "V4": 13}
+PARK_SOUTH = [1, 3, 5, 7, 9, 11, 13]
 RACKS = [(x, y) for y in (3.25, -3.25) for x in (-9.0, 0.0, 9.0)]  # centres; 5 m x 1.2 m
 
 
@@ -41,6 +43,10 @@ def build() -> Layout:
     for a, x in AISLES.items():
         node(f"{a}n", x, 3.25)
         node(f"{a}s", x, -3.25)
+    for k, x in enumerate(XS):  # parking above road A
+        node(f"P{k + 1:02d}", x, 8.75)
+    for k, x in enumerate(PARK_SOUTH):  # parking below road C
+        node(f"Q{k + 1}", x, -8.75)
     node("L0", -13, -8.5)
     for k, x in enumerate((-11, -9, -7, -5)):
         node(f"CH{k + 1}", x, -8.5, charge)
@@ -59,6 +65,10 @@ def build() -> Layout:
         both(f"{a}n", f"B{k:02d}", 0.6)
         both(f"B{k:02d}", f"{a}s", 0.6)
         both(f"{a}s", f"C{k:02d}", 0.6)
+    for k in range(len(XS)):
+        both(f"A{k + 1:02d}", f"P{k + 1:02d}", 0.5)
+    for k, x in enumerate(PARK_SOUTH):
+        both(f"C{XS.index(x) + 1:02d}", f"Q{k + 1}", 0.5)
     both("C01", "L0", 0.3)
     both("L0", "CH1", 0.3)
     for k in range(1, 4):
@@ -89,8 +99,7 @@ def build() -> Layout:
 
 
 def scenario(layout: Layout) -> str:
-    starts = [f"A{k:02d}" for k in range(1, 15, 2)] + [f"C{k:02d}" for k in range(2, 15, 2)]
-    starts += ["CH1", "CH2", "CH3", "CH4", "B01", "B14"]
+    starts = [f"P{k:02d}" for k in range(1, 15)] + [f"Q{k}" for k in range(1, 7)]
     params = {
         "differential": "{wheel_radius_m: 0.1, half_track_m: 0.22}",
         "tricycle": "{wheel_radius_m: 0.1, wheelbase_m: 0.5, half_track_m: 0.2}",
@@ -129,7 +138,7 @@ def scenario(layout: Layout) -> str:
             f"    model: {model}",
             f"    params: {params[model]}",
             "    body: {length_m: 0.6, width_m: 0.45}",
-            f"    pose: {{x_m: {x}, y_m: {y}, theta_deg: 0}}",
+            f"    pose: {{x_m: {x}, y_m: {y}, theta_deg: {-90 if y > 0 else 90}}}",
             f'    color: "{colors[model]}"',
             "    sensors:",
             "      - {type: lidar, beams: 91, fov_deg: 270, range_max_m: 5.0, rate_hz: 10}",

@@ -298,7 +298,12 @@ def validate(
 
     sc = _load(scenario, limit)
     try:
-        build(sc)
+        if sc.vda5050 is None:
+            build(sc)
+        else:  # vehicles start on layout nodes
+            from agvsim.fleet.build import build_fleet
+
+            build_fleet(sc)
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None
@@ -379,10 +384,18 @@ def bench(
         bool,
         typer.Option("--app", help="Only the browser app: 10 robots, 240-beam lidars, frames/s."),
     ] = False,
+    fleet_only: Annotated[
+        bool,
+        typer.Option("--fleet", help="Only the VDA 5050 fleet on MQTT (docs/fleet.md)."),
+    ] = False,
 ) -> None:
     """Measure ray-casting throughput, steps/s and real-time factor for 1, 100, 1000 robots
     (or, with --app, the browser app's frame rate)."""
-    if app_only:
+    if fleet_only:
+        from agvsim.fleet.bench import fleet_benchmark
+
+        result = fleet_benchmark(quick=quick, log=None if as_json else err.print)
+    elif app_only:
         from agvsim.bench_app import run_app_benchmark
 
         result = run_app_benchmark(

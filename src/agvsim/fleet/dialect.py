@@ -26,6 +26,7 @@ class Problem(StrEnum):
     INVALID_INSTANT_ACTION = "invalid_instant_action"
     ACTION_FAILED = "action_failed"  # pick with a full LHD, charging off a charger, ...
     BATTERY_EMPTY = "battery_empty"
+    INTERNAL = "internal"  # a fault in the simulated vehicle itself
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,7 @@ V2 = Dialect(
         Problem.INVALID_INSTANT_ACTION: ("instantActionError", "WARNING"),
         Problem.ACTION_FAILED: ("actionError", "WARNING"),
         Problem.BATTERY_EMPTY: ("batteryEmpty", "FATAL"),
+        Problem.INTERNAL: ("internalError", "FATAL"),
     },
     has_paused_status=False,  # 2.1.0's state schema has no 'PAUSED' action status
     broken="CONNECTIONBROKEN",
@@ -85,6 +87,7 @@ V3 = Dialect(
         Problem.INVALID_INSTANT_ACTION: ("INVALID_INSTANT_ACTION", "WARNING"),
         Problem.ACTION_FAILED: ("ACTION_FAILED", "CRITICAL"),
         Problem.BATTERY_EMPTY: ("BATTERY_EMPTY", "CRITICAL"),
+        Problem.INTERNAL: ("INTERNAL_ERROR", "FATAL"),
     },
     has_paused_status=True,
     broken="CONNECTION_BROKEN",

@@ -25,7 +25,10 @@ class FleetDriver:
         out = np.zeros((len(self.vehicles), 3))
         ranges = obs.ranges[self.sensor] if self.sensor and self.sensor in obs.ranges else None
         for j, v in enumerate(self.vehicles):
-            out[j] = v.control(obs.t_s, obs.true_pose[j], None if ranges is None else ranges[j])
+            try:
+                out[j] = v.control(obs.t_s, obs.true_pose[j], None if ranges is None else ranges[j])
+            except Exception as exc:  # noqa: BLE001 - one vehicle's fault stops it, not the run
+                v.fault(exc)
         return out
 
     def state_names(self) -> list[str]:

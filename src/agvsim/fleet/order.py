@@ -262,6 +262,12 @@ def _edge(
         props = layout.edges[e["edgeId"]].types.get(vehicle_type)
         traj = None if props is None else props.trajectory
     speed = e.get("maxSpeed", e.get("maximumSpeed"))
+    if speed is not None and not (isinstance(speed, int | float) and 0 < speed < math.inf):
+        raise OrderRefused(
+            Problem.VALIDATION,
+            f"edges[{i}] ({e['edgeId']}).maxSpeed: {speed!r} is not a speed > 0 (m/s)",
+            oid | {"edgeId": e["edgeId"]},
+        )
     return OrderEdge(
         e["edgeId"],
         e["sequenceId"],

@@ -32,10 +32,10 @@ def scan_points(
 ) -> np.ndarray:
     """(K, 2) world points of the returns closer than ``max_m``; ``dirs`` (B, 2) are the beam
     directions in the robot frame."""
-    near = np.isfinite(ranges) & (ranges < max_m) & (ranges > 0)
+    near = ranges < max_m  # -inf (closer than the sensor's minimum) counts, at 0 m
     if not near.any():
         return np.zeros((0, 2))
-    r = ranges[near][:, None]
+    r = np.maximum(ranges[near], 0.0)[:, None]
     local = np.asarray(mount_xy)[None, :] + r * dirs[near]
     c, s = math.cos(pose[2]), math.sin(pose[2])
     return np.column_stack(

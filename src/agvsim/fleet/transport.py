@@ -125,6 +125,8 @@ class MqttTransport:
             for v in vehicles
         ]
         self._last_misc = 0.0
+        self._pending: set[_Link] = set()  # links with output queued since the last write
+        self._writable: set[_Link] = set()  # links registered for EVENT_WRITE
 
     # socket bookkeeping (paho calls these)
     def _watch(self, sock, link: _Link) -> None:
@@ -137,11 +139,31 @@ class MqttTransport:
             pass
 
     def _want_write(self, sock, link: _Link, on: bool) -> None:
-        ev = selectors.EVENT_READ | (selectors.EVENT_WRITE if on else 0)
-        try:
-            self.sel.modify(sock, ev, link)
-        except (KeyError, ValueError):
-            pass
+        # output is written right after each flush (``_write_pending``); only a socket that
+        # could not take all of it waits for EVENT_WRITE, so a publish costs no selector call
+        if on:
+            self._pending.add(link)
+        elif link in self._writable:
+            self._writable.discard(link)
+            try:
+                self.sel.modify(sock, selectors.EVENT_READ, link)
+            except (KeyError, ValueError):
+                pass
+
+    def _write_pending(self) -> None:
+        pending, self._pending = self._pending, set()
+        for link in pending:
+            c = link.client
+            sock = c.socket()
+            if sock is None:
+                continue
+            c.loop_write()
+            if c.want_write() and link not in self._writable:
+                self._writable.add(link)
+                try:
+                    self.sel.modify(sock, selectors.EVENT_READ | selectors.EVENT_WRITE, link)
+                except (KeyError, ValueError):
+                    pass
 
     def connect(self, timeout_s: float = 10.0) -> int:
         """Connect every vehicle; returns how many are online after ``timeout_s`` at most."""
@@ -156,6 +178,7 @@ class MqttTransport:
 
     def poll(self, timeout_s: float = 0.0) -> None:
         """Serve the sockets for up to ``timeout_s`` (read, write, keepalive, reconnect)."""
+        self._write_pending()
         for key, events in self.sel.select(timeout=max(0.0, timeout_s)):
             c = key.data.client
             if events & selectors.EVENT_READ:
@@ -182,6 +205,7 @@ class MqttTransport:
                 self._flush_one(link)
             else:
                 link.vehicle.drain()
+        self._write_pending()
 
     def close(self) -> None:
         """Publish OFFLINE and disconnect cleanly (no last will)."""

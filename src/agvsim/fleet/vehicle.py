@@ -36,7 +36,14 @@ from agvsim.sim.spec import RobotSpec
 from agvsim.world.lif import Layout
 
 MAX_ERRORS = 20
+MIN_TOLERANCE_M = 0.05  # a stop node is reached within max(this, allowedDeviationXY)
+MIN_TOLERANCE_RAD = 0.02
 MAX_INSTANT_STATES = 50
+
+
+def _reach(node: OrderNode) -> float:
+    """How close to a stop node counts as there (m)."""
+    return max(MIN_TOLERANCE_M, node.dev_xy_m)
 
 
 @dataclass(frozen=True)
@@ -48,6 +55,7 @@ class VehicleConfig:
     map_id: str = "map"
     max_speed_m_s: float = 1.0
     lookahead_m: float = 0.6
+    control_period_s: float = 0.1  # the vehicle controller's tick (commands held between)
     state_period_s: float = 1.0  # a state at least this often, besides events
     vis_period_s: float = 1.0
     start_tolerance_m: float = 0.5  # an order's first node is reachable within this
@@ -91,6 +99,7 @@ class Vehicle:
         hl, hw = spec.footprint_half_m
         self._front_m = spec.body_offset_x_m + hl
         self._half_width_m = hw + cfg.field_side_margin_m
+        self._mount_m = 0.0 if lidar is None else math.hypot(*lidar.mount_xy)
         self.inbox: deque[tuple[str, Any]] = deque()
         self.outbox: list[tuple[str, dict, bool]] = []
         # protocol state
@@ -111,6 +120,7 @@ class Vehicle:
         self.t_s = 0.0
         self.distance_since_node_m = 0.0
         self._dirty, self._next_state_s, self._next_vis_s = True, 0.0, 0.0
+        self._next_control_s = 0.0
         self._want_factsheet = True
         self._loads_made = 0
         if start_node is not None:
@@ -126,8 +136,11 @@ class Vehicle:
     def control(self, t_s: float, pose: np.ndarray, ranges: np.ndarray | None) -> tuple:
         """One simulation step: handle messages, run actions, drive, publish. Returns the
         body twist (vx m/s, vy m/s, omega rad/s)."""
+        if not self.inbox and t_s < self._next_control_s - 1e-9:
+            return self.twist  # held between control ticks
+        self._next_control_s = t_s + self.cfg.control_period_s
         dt = max(0.0, t_s - self.t_s)
-        moved = float(np.hypot(*(pose[:2] - self.pose[:2])))
+        moved = math.hypot(float(pose[0]) - self.pose[0], float(pose[1]) - self.pose[1])
         self.t_s, self.pose = t_s, np.asarray(pose, dtype=np.float64)
         self.distance_since_node_m += moved
         while self.inbox:
@@ -391,7 +404,7 @@ class Vehicle:
             k = next((j for j, n in enumerate(targets) if n is self.leg.nodes[-1]), None)
             if k is not None and len(t_edges) > k:
                 self.leg.extend(
-                    targets[k:], t_edges[k:], self._speeds(t_edges[k:]), targets[-1].dev_xy_m
+                    targets[k:], t_edges[k:], self._speeds(t_edges[k:]), _reach(targets[-1])
                 )
 
     def _on_instant(self, payload: Any) -> None:
@@ -601,14 +614,16 @@ class Vehicle:
         if self.leg is None:
             nodes, edges = self._leg_targets()
             self.leg = Leg(
-                nodes, edges, self._speeds(edges), self.cfg.lookahead_m, nodes[-1].dev_xy_m
+                nodes, edges, self._speeds(edges), self.cfg.lookahead_m, _reach(nodes[-1])
             )
         leg = self.leg
         tw = leg.twist(self.pose, self.mob)
         # pass the nodes the progress has reached
-        while self.route_nodes and leg.index(self.route_nodes[0]) is not None:
+        while self.route_nodes:
             n = self.route_nodes[0]
-            k = leg.index(n) or 0
+            k = leg.index(n)
+            if k is None:
+                break
             if k < len(leg.nodes) - 1:
                 if leg.s < leg.node_s[k] - 1e-6:
                     break
@@ -618,7 +633,7 @@ class Vehicle:
                 break
             if n.theta is not None and (self.mob.can_spin or self.mob.holonomic):
                 err = wrap(n.theta - float(self.pose[2]))
-                if abs(err) > n.dev_theta_rad:
+                if abs(err) > max(MIN_TOLERANCE_RAD, n.dev_theta_rad):
                     return 0.0, 0.0, max(-1.0, min(1.0, 2.0 * err))
             self.leg = None
             self._traverse(n)
@@ -631,9 +646,12 @@ class Vehicle:
         length = safety.field_length_m(
             speed, self._front_m, self.cfg.reaction_s, self.cfg.decel_m_s2, self.cfg.field_margin_m
         )
-        pts = safety.scan_points(
-            self.pose, self.lidar.mount_xy, self.lidar.dirs, ranges, length + self._half_width_m
-        )
+        # a return farther than the field's reach (plus the mount offset and a margin for
+        # the distance from the path) cannot be in it: most ticks end here
+        reach = length + self._half_width_m + self._mount_m + 0.5
+        if float(ranges.min()) > reach:
+            return False
+        pts = safety.scan_points(self.pose, self.lidar.mount_xy, self.lidar.dirs, ranges, reach)
         if len(pts) == 0:
             return False
         path = self.leg.ahead(length)
@@ -655,6 +673,13 @@ class Vehicle:
         if self.cfg.vis_period_s > 0 and t >= self._next_vis_s - 1e-9:
             self.outbox.append(("visualization", self.visualization(), False))
             self._next_vis_s = t + self.cfg.vis_period_s
+
+    def fault(self, exc: BaseException) -> None:
+        """A failure inside the vehicle's own code: it stops, reports it, and stays up."""
+        if not any(e[0] == "fault" for e in self.errors):
+            self._error("fault", Problem.INTERNAL, f"{type(exc).__name__}: {exc}", {})
+        self.twist, self.driving, self.leg = (0.0, 0.0, 0.0), False, None
+        self._publish_due()
 
     def drain(self) -> list[tuple[str, dict, bool]]:
         out, self.outbox = self.outbox, []
