@@ -23,6 +23,7 @@ from agvsim.control.adapters import WheelsFromTwist
 from agvsim.control.api import ControllerContext
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
+from agvsim.control.traffic import KeepClear, RobotSight, StaticMap, sight_sensor
 from agvsim.dynamics.vehicle import check_dynamics
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
@@ -445,19 +446,21 @@ def _takes_no_arguments(fn: Any) -> bool:
 
 
 def _bindings(
-    sc: Scenario, specs: list[RobotSpec], base_dir: Path, grid: OccupancyGrid
+    sc: Scenario, specs: list[RobotSpec], base_dir: Path, grid: OccupancyGrid, boxes: np.ndarray
 ) -> list[Binding]:
     out: list[Binding] = []
+    static = StaticMap.of(grid, boxes)
     avoid_groups: dict[tuple, list[int]] = {}
     names = tuple(r.name for r in sc.robots)
     for i, rc in enumerate(sc.robots):
         c, where = rc.controller, f"robots[{i}] ({rc.name})"
         if type(c) in BEHAVIOURS:
-            ctx = ControllerContext(i, specs[i], grid, names, base_dir)
+            ctx = ControllerContext(i, specs[i], grid, names, base_dir, static)
             try:
-                out.append(Binding(BEHAVIOURS[type(c)](c, ctx), (i,)))
+                ctrl = BEHAVIOURS[type(c)](c, ctx)
             except ValueError as err:
                 raise ScenarioError("", [f"{where}.controller: {err}"]) from None
+            out.append(Binding(_keep_clear(ctrl, c, specs[i], static), (i,)))
         elif isinstance(c, ScriptConfig):
             steps = []
             for st in c.steps:
@@ -514,11 +517,22 @@ def _bindings(
             heading_source=c.heading_source,
             side_clearance_m=c.side_clearance_m,
             can_spin=~np.array(car),
+            sight=RobotSight.for_robots([specs[i] for i in idx], static, sight_sensor(spec0) or ""),
         )
         if mode == ControlMode.FORWARD:
             ctrl = WheelsFromTwist(ctrl, stack_models([specs[i].model for i in idx]))
         out.append(Binding(ctrl, tuple(idx), batch=True))
     return out
+
+
+def _keep_clear(ctrl: Any, cfg: Any, spec: RobotSpec, static: StaticMap) -> Any:
+    """A built-in behaviour, slowed to stop before other robots its lidar sees. Not the
+    teleop (the user drives) nor the pursuer (it is meant to reach its target)."""
+    if cfg.type in ("teleop", "pursue"):
+        return ctrl
+    sensor = sight_sensor(spec)
+    sight = None if sensor is None else RobotSight.for_robots([spec], static, sensor)
+    return ctrl if sight is None else KeepClear(ctrl, sight)
 
 
 def _driven_names(spec: RobotSpec) -> list[str]:
@@ -575,7 +589,7 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     except ValueError as err:
         raise ScenarioError("", [f"world.{err}"]) from None
     world = World(grid, boxes, look, floor=floor_spec(sc.world.floor))
-    bindings = _bindings(sc, specs, base, grid)
+    bindings = _bindings(sc, specs, base, grid, boxes)
     sim = Simulation(
         world,
         specs,

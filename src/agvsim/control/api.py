@@ -146,3 +146,4 @@ class ControllerContext:
     grid: object  # the world's OccupancyGrid (for behaviours that plan on a known map)
     robot_names: tuple[str, ...] = ()
     base_dir: object = None  # the scenario file's folder (pathlib.Path)
+    static: object = None  # the known map's StaticMap (walls + boxes), to tell robots apart

@@ -16,6 +16,13 @@ Ackermann car turns on an arc: their noses swing out by more than half their wid
 right turn started next to a wall on the right hits it (found by 10-minute endurance runs in
 the App. C.1 maze). The default clearance is ``0.8 * trigger_m``: the room the designer gives
 the turn ahead, asked for at the side the robot turns to as well.
+
+Other robots (``sight``, a :class:`agvsim.control.traffic.RobotSight` on the robots' lidar): a
+robot in the body's path ahead counts as an obstacle ahead (the robot turns right as it would
+for a wall), one in the path behind as one behind (a car's K-turn stops reversing), and every
+command is slowed to stop ``sight.stop_gap_m`` short of a robot in the way
+(``RobotSight.limit``). The single front ranger of the thesis misses a robot coming in at an
+angle; the lidar does not.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from agvsim.control.api import BatchObservation
+from agvsim.control.traffic import RobotSight
 from agvsim.kinematics.base import wrap_angle, wrap_scalar
 
 DRIVE, TURN, REVERSE, BACKOFF = 0, 1, 2, 3
@@ -49,6 +57,7 @@ class ObstacleAvoidance:
         backoff_s: float = 0.6,
         snap: bool = True,
         heading_source: str = "true_pose",
+        sight: RobotSight | None = None,
     ):
         self.sensor = sensor
         self.front = np.asarray(front_beams, dtype=np.int64)
@@ -66,6 +75,7 @@ class ObstacleAvoidance:
                 f"heading_source must be 'true_pose' or 'odometry', got {heading_source!r}"
             )
         self.heading_source = heading_source
+        self.sight = sight
 
     def reset(self, k: int, rng: np.random.Generator) -> None:
         self.state = np.full(k, DRIVE, dtype=np.int64)
@@ -113,7 +123,19 @@ class ObstacleAvoidance:
                 self.side_clear,
             ]
         )
-        cmd = np.zeros((len(heading), 3))
+        k = len(heading)
+        robot_front, robot_back = np.full(k, np.inf), np.full(k, np.inf)
+        blocked = np.zeros(k, dtype=bool)
+        sight = self.sight if self.sight is not None and self.sight.sensor in obs.ranges else None
+        if sight is not None:  # other robots on the lidar, as distances from the reference point
+            scan = sight.robot_points(obs.true_pose, obs.ranges[sight.sensor])
+            fp = sight.body
+            ahead = sight.free_m(obs.true_pose, scan, 0.0)
+            walls = sight.free_m(obs.true_pose, scan, 0.0, walls_margin_m=0.03)
+            robot_front = np.minimum(ahead, walls) + fp.half_length_m + fp.offset_x_m
+            robot_back = sight.free_m(obs.true_pose, scan, np.pi) + fp.half_length_m - fp.offset_x_m
+            blocked = ahead < sight.stop_gap_m + 0.1
+        cmd = np.zeros((k, 3))
         _avoid_step(
             self.state,
             self.target,
@@ -127,10 +149,15 @@ class ObstacleAvoidance:
             self._right,
             np.ascontiguousarray(heading),
             np.ascontiguousarray(obs.bump),
+            robot_front,
+            robot_back,
+            blocked,
             obs.t_s,
             params,
             cmd,
         )
+        if sight is not None:
+            cmd = sight.limit(cmd, obs.true_pose, scan)
         return cmd
 
     def state_names(self) -> list[str]:
@@ -185,6 +212,9 @@ def _avoid_step(
     right_beams,
     heading,
     bump,
+    robot_front,
+    robot_back,
+    blocked,
     t,
     params,
     cmd,
@@ -195,8 +225,8 @@ def _avoid_step(
     side_clear = params[7]
     close = 0.45 * trigger
     for i in range(state.shape[0]):
-        front = _nearest(ranges, i, front_beams)
-        back = _nearest(ranges, i, back_beams) if back_beams.size else np.inf
+        front = min(_nearest(ranges, i, front_beams), robot_front[i])
+        back = min(_nearest(ranges, i, back_beams) if back_beams.size else np.inf, robot_back[i])
         h = heading[i]
         s = state[i]
         was_back = s == BACKOFF
@@ -216,7 +246,7 @@ def _avoid_step(
         err = wrap_scalar(target[i] - h)
         if (s == TURN or s == REVERSE) and abs(err) < tol:
             s = DRIVE
-        if s == TURN and not spin[i] and front < close:  # car-like: K-turn
+        if s == TURN and not spin[i] and (front < close or blocked[i]):  # car-like: K-turn
             s = REVERSE
         if s == REVERSE and (back < close or front > trigger):
             s = TURN
