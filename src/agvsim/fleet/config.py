@@ -8,7 +8,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # as every scenario block: NaN and inf refused, text bounded
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=4096)
 
 
 class LayoutConfig(_Strict):
@@ -44,9 +45,9 @@ class Vda5050Config(_Strict):
     max_speed_m_s: float = Field(1.0, gt=0, le=10)
     state_period_s: float = Field(1.0, gt=0, le=30, description="state at least this often")
     visualization_period_s: float = Field(1.0, ge=0, le=60, description="0: no visualization")
-    pick_time_s: float = Field(3.0, ge=0)
-    drop_time_s: float = Field(3.0, ge=0)
-    vehicles: list[VehicleEntry] = Field(min_length=1)
+    pick_time_s: float = Field(3.0, ge=0, le=3600)
+    drop_time_s: float = Field(3.0, ge=0, le=3600)
+    vehicles: list[VehicleEntry] = Field(min_length=1, max_length=100_000)
 
     @model_validator(mode="after")
     def _unique(self) -> Vda5050Config:
