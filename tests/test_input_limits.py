@@ -357,3 +357,20 @@ def test_a_device_or_folder_is_not_read():
     for path in ("/dev/zero", Path(__file__).parent):
         rc, text = _cli("validate", str(path))
         assert rc == 2 and "the file is a directory or a device, not a regular file" in text
+
+
+def test_the_static_distance_field_stays_bounded_on_a_huge_map():
+    """Every build rasters the walls for telling robots from walls (control.traffic): on a
+    2 km map it samples coarser instead of allocating 1.6e9 cells."""
+    from agvsim.control.traffic import MAX_RASTER_CELLS, StaticMap
+    from agvsim.world.grid import OccupancyGrid
+
+    occupied = np.zeros((20, 20), dtype=bool)
+    occupied[0, :] = True
+    grid = OccupancyGrid(occupied, 100.0, (-1000.0, -1000.0))
+    static = StaticMap.of(grid)
+    assert static.dist_m.size <= MAX_RASTER_CELLS * 1.01
+    assert static.resolution_m == pytest.approx(2000.0 / 2000.0)
+    # the top row of cells is wall: 1 km north of the centre is 50 m from it (within a sample)
+    d = static.distance_m(np.array([0.0]), np.array([850.0]))
+    assert d[0] == pytest.approx(50.0, abs=1.5)

@@ -39,6 +39,7 @@ from agvsim.control.api import Observation, Twist, WheelCommand
 from agvsim.world.grid import OccupancyGrid
 
 RASTER_M = 0.05  # resolution of the static map's distance field
+MAX_RASTER_CELLS = 4_000_000  # a larger map is rastered coarser (memory stays ~200 MB)
 HORIZON_SAMPLES = 8  # instants checked along a commanded motion
 
 
@@ -55,8 +56,11 @@ class StaticMap:
         cls, grid: OccupancyGrid, boxes: np.ndarray | None = None, resolution_m: float = RASTER_M
     ) -> StaticMap:
         """The distance field of ``grid`` plus ``boxes`` ((K, 5) cx, cy, theta, half_length,
-        half_width), sampled every ``resolution_m`` (outside the grid counts as wall)."""
+        half_width), sampled every ``resolution_m`` (outside the grid counts as wall); a map
+        that would take more than ``MAX_RASTER_CELLS`` samples is sampled coarser."""
         xmin, xmax, ymin, ymax = grid.extent_m
+        area_m2 = (xmax - xmin) * (ymax - ymin)
+        resolution_m = max(resolution_m, math.sqrt(area_m2 / MAX_RASTER_CELLS))
         nx = int(math.ceil((xmax - xmin) / resolution_m))
         ny = int(math.ceil((ymax - ymin) / resolution_m))
         xs = xmin + (np.arange(nx) + 0.5) * resolution_m
