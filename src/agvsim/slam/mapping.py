@@ -146,6 +146,10 @@ def _render(
         )
 
 
+_L_OCCUPIED = math.log(0.65 / 0.35)  # p > 0.65
+_L_FREE = math.log(0.196 / 0.804)  # p < 0.196
+
+
 @dataclass(frozen=True)
 class OccupancyMap:
     """A log-odds occupancy grid (``[iy, ix]``, row 0 south) and its geometry."""
@@ -160,11 +164,13 @@ class OccupancyMap:
         return 1.0 - 1.0 / (1.0 + np.exp(self.logodds.astype(np.float64)))
 
     def picture(self) -> NDArray[np.uint8]:
-        """Trinary map_server picture (row 0 north): occupied 0, free 254, unknown 205."""
-        p = self.probability[::-1]
-        img = np.full(p.shape, 205, np.uint8)
-        img[p < 0.196] = 254
-        img[p > 0.65] = 0
+        """Trinary map_server picture (row 0 north): occupied 0 (p > 0.65), free 254
+        (p < 0.196), unknown 205. Thresholds compared in log-odds, ``l > log(0.65 / 0.35)``
+        and ``l < log(0.196 / 0.804)``: no float64 probability grid for a large map."""
+        lo = self.logodds[::-1]
+        img = np.full(lo.shape, 205, np.uint8)
+        img[lo < _L_FREE] = 254
+        img[lo > _L_OCCUPIED] = 0
         return img
 
 
@@ -228,8 +234,12 @@ def save_map_png(grid: OccupancyMap, path: str | Path) -> Path:
     from PIL import Image
 
     p = Path(path)
-    prob = grid.probability[::-1]
-    img = np.clip(255.0 * (1.0 - prob), 0, 255).astype(np.uint8)
-    img[grid.logodds[::-1] == 0] = 205
+    lo = grid.logodds[::-1]
+    img = np.empty(lo.shape, np.uint8)
+    for r0 in range(0, lo.shape[0], 512):  # in bands of rows: no float64 copy of a large map
+        band = lo[r0 : r0 + 512].astype(np.float64)
+        free = 255.0 / (1.0 + np.exp(band))  # 255 (1 - p)
+        img[r0 : r0 + 512] = np.clip(free, 0, 255).astype(np.uint8)
+    img[lo == 0] = 205
     Image.fromarray(img).save(p, format="PNG")
     return p
