@@ -307,6 +307,19 @@ def test_validate_takes_raised_limits():
     assert rc == 0 and text.endswith("valid"), text
 
 
+def test_validate_sets_up_metrics_and_slam_as_run_does(tmp_path):
+    data = _scenario(metrics={"coverage": {"robot": "r1", "sensor": "lidar"}})
+    path = tmp_path / "cov.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    rc, text = _cli("validate", str(path))
+    assert rc == 2 and "metrics.coverage.sensor: robot 'r1' has no sensor 'lidar'" in text
+    data = _scenario()
+    data["robots"][0]["slam"] = {"sensor": "lidar"}
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    rc, text = _cli("validate", str(path))
+    assert rc == 2 and "robots[0].slam.sensor: robot 'r1' has no sensor 'lidar'" in text
+
+
 def test_trajectory_writer_refuses_a_zero_period(tmp_path):
     sim = build(load_scenario(BAD.parent.parent.parent / "scenarios" / "thesis_maze_avoid.yaml"))
     for every in (0, -3, 1.5):

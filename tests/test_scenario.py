@@ -169,6 +169,7 @@ CASES = [
     ("long_robot_name.yaml", r"robots\[0\]\.name\b", ["at most 64 characters", "(202 chars)"]),
     ("limits_key_typo.yaml", r"\blimits\.max_step\b", ["did you mean 'max_steps'?"]),
     ("inf_model_param.yaml", r"robots\[0\]\.params\b", ["wheel_radius_m", "finite number"]),
+    ("metric_unknown_robot.yaml", r"\bmetrics\.reach\.robot\b", ["'omni' is not a robot", "car"]),
 ]
 
 # Faults that were once reported badly (kept apart as regression cases).

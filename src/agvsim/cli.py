@@ -259,12 +259,16 @@ def validate(
     scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
     limit: Annotated[list[str] | None, typer.Option(help=LIMIT_HELP, metavar="NAME=VALUE")] = None,
 ) -> None:
-    """Check a scenario file (schema, map, robot placement, limits) without running it."""
+    """Check a scenario file (schema, map, robot placement, limits, metrics, SLAM) without
+    running it."""
+    from agvsim.runner import build_metrics, build_slams
     from agvsim.scenario import ScenarioError, build
 
     sc = _load(scenario, limit)
     try:
-        build(sc)
+        sim = build(sc)
+        build_metrics(sc, sim, str(scenario))  # what `run` sets up before its first step
+        build_slams(sc, sim, str(scenario))
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None

@@ -398,6 +398,17 @@ class Scenario(_Strict):
         if dup:
             shown = dup[:20] + ([f"... {len(dup) - 20} more"] if len(dup) > 20 else [])
             raise ValueError(f"robot names must be unique; repeated: {shown}")
+        m = self.metrics
+        named = [("capture.pursuer", m.capture and m.capture.pursuer)]
+        named += [("capture.evader", m.capture and m.capture.evader)]
+        named += [("reach.robot", m.reach and m.reach.robot)]
+        named += [("coverage.robot", m.coverage and m.coverage.robot)]
+        for field, name in named:
+            if name and name not in counts:
+                raise ValueError(
+                    f"metrics.{field}: {short_repr(name)} is not a robot"
+                    + _did_you_mean(name, list(counts)[:50])
+                )
         for k, r in enumerate(self.robots):
             for other in r.knows:
                 if other not in counts or other == r.name:
@@ -514,6 +525,9 @@ def _format_errors(err: ValidationError) -> list[str]:
             shown = short_repr(value) if not isinstance(value, dict | list) else ""
             if isinstance(value, dict | list) and len(value) <= 8:
                 shown = short_repr(value)
+            if not loc and re.match(r"[\w.\[\]]+: ", msg):
+                out.append(msg)  # a whole-object check that names its own field
+                continue
             out.append(f"{where}: {msg}" + (f" (got {shown})" if shown else ""))
     if len(errors) > MAX_PROBLEMS:
         out.append(f"... and {len(errors) - MAX_PROBLEMS:,} more problems")
