@@ -428,7 +428,8 @@ def _loc(loc: tuple) -> str:
         else:  # a key that is not a plain name (a user's odd key) is quoted
             text = str(part)
             plain = re.fullmatch(r"[\w\-]{1,64}", text) or text.startswith("'")
-            out += ("." if out else "") + (text if plain else short_repr(text, 40))
+            quoted = repr(text if len(text) <= 40 else text[:30] + "...")
+            out += ("." if out else "") + (text if plain else quoted)
     return out or "(top level)"
 
 
