@@ -35,7 +35,8 @@ from agvsim.cli import app
 LEAKS = ("Traceback", 'File "', "Error:", "numpy.", "np.", "dtype", "pydantic", "validation error")
 # a refusal's problem lines start with where the problem is
 WHERE = re.compile(
-    r"^(line \d+: |((?:[\w\-]+|'[^']*'|\"[^\"]*\"|\[\d*\])(?: \(.*?\))?\.?)+(?: \(.*?\))?"
+    r"^(line \d+: |((?:[\w\-]+|'(?:[^'\\]|\\.)*'|\"(?:[^\"\\]|\\.)*\"|\[\d*\])(?: \(.*?\))?\.?)+"
+    r"(?: \(.*?\))?"
     r"(?:, (?:row|line|column|field|key) [^:]+)?: "
     r"|\(top level\): |robots '.*' and '.*' start|the file |\.\.\. and [\d,]+ more)"
 )

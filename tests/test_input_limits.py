@@ -41,7 +41,7 @@ def test_billion_laughs_is_refused_at_once():
     lines += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]" for i in range(1, 10)]
     with pytest.raises(YamlInputError) as info:
         load_yaml("\n".join(lines), "bomb.yaml")
-    # 10 + 1 values in a0, 111 in a1, ...: a5 holds 1,111,111 > 1,000,000 (line 6)
+    # 10 + 1 values in a0, 111 in a1, ...: a5 (line 6) holds 1,111,111, over 250,000 at once
     assert info.value.line == 6
     assert "aliases expand past the limit yaml_max_nodes" in str(info.value)
 
@@ -60,7 +60,7 @@ def test_data_from_anywhere_is_measured_with_shared_parts_expanded():
         measure_data([[[1]]], "t", YamlLimits(max_depth=2))
     # the browser app parses with PyYAML itself: the loader still refuses the bomb unexpanded
     data = yaml.safe_load((BAD / "alias_bomb_robots.yaml").read_text(encoding="utf-8"))
-    with pytest.raises(ScenarioError, match="more than 1,000,000 values"):
+    with pytest.raises(ScenarioError, match="more than 250,000 values"):
         parse_scenario(data, "upload")
 
 
@@ -305,6 +305,19 @@ def test_validate_takes_raised_limits():
     assert rc == 2 and "max_steps = 10,000,000" in text
     rc, text = _cli("validate", str(BAD / "tiny_dt.yaml"), "--limit", "max_steps=5e10")
     assert rc == 0 and text.endswith("valid"), text
+
+
+def test_validate_sets_up_metrics_and_slam_as_run_does(tmp_path):
+    data = _scenario(metrics={"coverage": {"robot": "r1", "sensor": "lidar"}})
+    path = tmp_path / "cov.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    rc, text = _cli("validate", str(path))
+    assert rc == 2 and "metrics.coverage.sensor: robot 'r1' has no sensor 'lidar'" in text
+    data = _scenario()
+    data["robots"][0]["slam"] = {"sensor": "lidar"}
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    rc, text = _cli("validate", str(path))
+    assert rc == 2 and "robots[0].slam.sensor: robot 'r1' has no sensor 'lidar'" in text
 
 
 def test_trajectory_writer_refuses_a_zero_period(tmp_path):

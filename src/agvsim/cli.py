@@ -293,13 +293,17 @@ def validate(
     scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
     limit: Annotated[list[str] | None, typer.Option(help=LIMIT_HELP, metavar="NAME=VALUE")] = None,
 ) -> None:
-    """Check a scenario file (schema, map, robot placement, limits) without running it."""
+    """Check a scenario file (schema, map, robot placement, limits, metrics, SLAM) without
+    running it."""
+    from agvsim.runner import build_metrics, build_slams
     from agvsim.scenario import ScenarioError, build
 
     sc = _load(scenario, limit)
     try:
         if sc.vda5050 is None:
-            build(sc)
+            sim = build(sc)
+            build_metrics(sc, sim, str(scenario))  # what `run` sets up before its first step
+            build_slams(sc, sim, str(scenario))
         else:  # vehicles start on layout nodes
             from agvsim.fleet.build import build_fleet
 

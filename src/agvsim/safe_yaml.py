@@ -42,7 +42,7 @@ class YamlLimits:
     with room to spare; large maps belong in a map file (``world.file``), not inline."""
 
     max_bytes: int = 16 * 1024 * 1024  # file size
-    max_nodes: int = 1_000_000  # scalars + lists + mappings, aliases expanded
+    max_nodes: int = 250_000  # scalars + lists + mappings, aliases expanded
     max_depth: int = 64  # nested lists / mappings
 
     def __post_init__(self) -> None:
@@ -98,48 +98,69 @@ def _yaml_problem(err: Exception, text: str) -> tuple[str, int | None]:
     return (text[0] if text else type(err).__name__), line
 
 
+def _line(event: Any) -> int | None:
+    return event.start_mark.line + 1 if event.start_mark is not None else None
+
+
 def _measure(text: str, source: str, limits: YamlLimits) -> None:
-    """Walk the parser's events once; refuse a document too deep or too large when expanded."""
+    """Walk the parser's events once; refuse a document too deep or too large when expanded.
+
+    ``total`` counts every value seen so far, each alias as the expanded size of its anchor
+    (a collection's size is known at its end event and kept by anchor name)."""
     parser = _Parser(text) if _Parser is not None else yaml.SafeLoader(text)
-    # per open collection: [anchor, nodes so far]; aliases add their anchor's expanded size
-    stack: list[list[Any]] = [[None, 0]]
+    scalar, alias, start, end = (
+        yaml.ScalarEvent,
+        yaml.AliasEvent,
+        (yaml.SequenceStartEvent, yaml.MappingStartEvent),
+        (yaml.SequenceEndEvent, yaml.MappingEndEvent),
+    )
+    stack: list[list[Any]] = [[None, 0]]  # per open collection: [anchor, values so far]
     sizes: dict[str, int] = {}
+    total = 0
     try:
         while (event := parser.get_event()) is not None:
-            if isinstance(event, yaml.StreamEndEvent):
-                break
-            line = event.start_mark.line + 1 if event.start_mark is not None else None
-            if isinstance(event, yaml.CollectionStartEvent):
+            kind = type(event)
+            if kind is scalar:
+                size = 1
+                if event.anchor is not None:
+                    sizes[event.anchor] = 1
+            elif kind is alias:
+                size = sizes.get(event.anchor, 1)  # an unknown anchor: PyYAML reports it later
+            elif kind in start:
                 if len(stack) > limits.max_depth:
                     raise YamlInputError(
                         source,
                         f"lists/mappings nested deeper than {limits.max_depth} levels "
                         "(limit yaml_max_depth; see docs/scenario.md, 'Limits')",
-                        line,
+                        _line(event),
                     )
                 stack.append([event.anchor, 1])  # the collection itself counts as one
-                size = 0
-            elif isinstance(event, yaml.CollectionEndEvent):
-                anchor, size = stack.pop()
+                total += 1
+                continue
+            elif kind in end:
+                anchor, inner = stack.pop()
                 if anchor is not None:
-                    sizes[anchor] = size
-            elif isinstance(event, yaml.ScalarEvent):
-                size = 1
-                if event.anchor is not None:
-                    sizes[event.anchor] = 1
-            elif isinstance(event, yaml.AliasEvent):
-                size = sizes.get(event.anchor, 1)  # an unknown anchor: PyYAML reports it later
+                    sizes[anchor] = inner
+                stack[-1][1] += inner  # already in total
+                continue
             else:  # stream / document start and end
                 continue
             stack[-1][1] += size
-            if sum(s[1] for s in stack) > limits.max_nodes:  # the stack is max_depth deep at most
-                what = "aliases expand" if isinstance(event, yaml.AliasEvent) else "it grows"
+            total += size
+            if total > limits.max_nodes:
+                what = "aliases expand" if kind is alias else "it grows"
                 raise YamlInputError(
                     source,
                     f"the document holds more than {limits.max_nodes:,} values ({what} past "
                     "the limit yaml_max_nodes; see docs/scenario.md, 'Limits')",
-                    line,
+                    _line(event),
                 )
+        if total > limits.max_nodes:  # the last collection's own count
+            raise YamlInputError(
+                source,
+                f"the document holds more than {limits.max_nodes:,} values "
+                "(limit yaml_max_nodes; see docs/scenario.md, 'Limits')",
+            )
     finally:
         dispose = getattr(parser, "dispose", None)
         if dispose is not None:

@@ -61,7 +61,7 @@ class Limits:
     max_camera_pixels_per_s: float = 100e6  # width x height x rate, all cameras together
     max_lidar_rays_per_s: float = 50e6  # beams x rate, all range sensors together
     yaml_max_bytes: int = 16 * 1024 * 1024
-    yaml_max_nodes: int = 1_000_000  # values in the YAML, aliases expanded
+    yaml_max_nodes: int = 250_000  # values in the YAML, aliases expanded (~1.5 s to read)
     yaml_max_depth: int = 64  # nested lists / mappings
 
     def __post_init__(self) -> None:

@@ -406,6 +406,17 @@ class Scenario(_Strict):
         if dup:
             shown = dup[:20] + ([f"... {len(dup) - 20} more"] if len(dup) > 20 else [])
             raise ValueError(f"robot names must be unique; repeated: {shown}")
+        m = self.metrics
+        named = [("capture.pursuer", m.capture and m.capture.pursuer)]
+        named += [("capture.evader", m.capture and m.capture.evader)]
+        named += [("reach.robot", m.reach and m.reach.robot)]
+        named += [("coverage.robot", m.coverage and m.coverage.robot)]
+        for field, name in named:
+            if name and name not in counts:
+                raise ValueError(
+                    f"metrics.{field}: {short_repr(name)} is not a robot"
+                    + _did_you_mean(name, list(counts)[:50])
+                )
         for k, r in enumerate(self.robots):
             for other in r.knows:
                 if other not in counts or other == r.name:
@@ -425,7 +436,8 @@ def _loc(loc: tuple) -> str:
         else:  # a key that is not a plain name (a user's odd key) is quoted
             text = str(part)
             plain = re.fullmatch(r"[\w\-]{1,64}", text) or text.startswith("'")
-            out += ("." if out else "") + (text if plain else short_repr(text, 40))
+            quoted = repr(text if len(text) <= 40 else text[:30] + "...")
+            out += ("." if out else "") + (text if plain else quoted)
     return out or "(top level)"
 
 
@@ -522,6 +534,9 @@ def _format_errors(err: ValidationError) -> list[str]:
             shown = short_repr(value) if not isinstance(value, dict | list) else ""
             if isinstance(value, dict | list) and len(value) <= 8:
                 shown = short_repr(value)
+            if not loc and re.match(r"[\w.\[\]]+: ", msg):
+                out.append(msg)  # a whole-object check that names its own field
+                continue
             out.append(f"{where}: {msg}" + (f" (got {shown})" if shown else ""))
     if len(errors) > MAX_PROBLEMS:
         out.append(f"... and {len(errors) - MAX_PROBLEMS:,} more problems")
