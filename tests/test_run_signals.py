@@ -392,3 +392,16 @@ def test_sigterm_stops_a_sweep_like_ctrl_c_and_keeps_finished_runs(tmp_path):
     assert "interrupted" in stderr and "Traceback" not in stderr, stderr
     kept = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
     assert len(kept) == 1 and kept[0].endswith(".json"), kept  # the quick run, done before
+
+
+def test_a_hanging_controller_ends_its_sweep_or_grading_run_not_the_whole_job(tmp_path):
+    from agvsim.experiments.runs import RunTask, execute
+
+    (tmp_path / "ctrl.py").write_text(HANGS.format(body="time.sleep(3600)"))
+    data = yaml_load(SCENARIO.format(duration=5.0))
+    task = RunTask("r0", 0, 0, data, str(tmp_path), "test", controller_time_limit_s=0.3)
+    t0 = time.monotonic()
+    row = execute(task)
+    assert time.monotonic() - t0 < 60
+    assert row["status"] == "controller_error"  # a finished run: its row is kept
+    assert "time limit of 0.3 s" in row["error"] and row["simulated_time_s"] == pytest.approx(0.2)
