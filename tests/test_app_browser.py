@@ -68,7 +68,7 @@ def page(app):
                 and pg.outside.append(r.url)
             ),
         )
-        pg.goto(f"http://127.0.0.1:{app.port}/")
+        pg.goto(app.url)
         pg.get_by_role("tab", name="Run").wait_for(timeout=30000)
         pg.wait_for_timeout(1500)
         yield pg
@@ -175,7 +175,7 @@ def test_a_maze_cell_clicked_in_the_editor_becomes_a_wall_the_lidar_sees(app, pa
 def test_a_second_tab_watches_and_closing_it_does_not_stop_the_run(app, page):
     s = app.session
     other = page.context.browser.new_page()
-    other.goto(f"http://127.0.0.1:{app.port}/")
+    other.goto(app.url)
     other.get_by_role("tab", name="Run").wait_for(timeout=30000)
     wait_for(lambda: len(app.server.get_clients()) == 2, what="two clients")
     s.play()

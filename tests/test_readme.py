@@ -11,8 +11,11 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
+
+import pytest
 
 from agvsim.bench_app import free_port
 
@@ -56,9 +59,13 @@ def test_readme_main_command_serves_the_app_on_localhost():
             if "agvsim app on" in line:
                 break
         banner = "".join(lines)
-        assert f"agvsim app on http://127.0.0.1:{port}" in banner, banner
-        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30).read()
+        found = re.search(rf"agvsim app on (http://127\.0\.0\.1:{port}/\?token=[\w-]+)", banner)
+        assert found, banner
+        page = urllib.request.urlopen(found[1], timeout=30).read()
         assert b"<html" in page.lower() or b"<!doctype html" in page.lower()
+        with pytest.raises(urllib.error.HTTPError) as refused:  # without the token: no app
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30)
+        assert refused.value.code == 403
         listening = [c for c in _listeners(port)]
         assert listening and all(addr == "127.0.0.1" for addr in listening), listening
     finally:

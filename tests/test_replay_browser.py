@@ -49,7 +49,7 @@ def test_replay_page_plays_the_recording(tmp_path):
             page = browser.new_page(viewport={"width": 1280, "height": 800})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(f"http://127.0.0.1:{app.port}/")
+            page.goto(app.url)
             page.get_by_role("button", name="Play").wait_for(timeout=30000)
             page.get_by_role("button", name="Top view").click()
             page.wait_for_timeout(1500)

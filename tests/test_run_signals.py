@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+from yaml import safe_dump as yaml_dump
+from yaml import safe_load as yaml_load
 
 from agvsim.kinematics import DifferentialDrive
 from agvsim.runner import run_scenario
@@ -343,3 +345,63 @@ def test_keyboard_interrupt_from_a_controller_still_interrupts(tmp_path):
         run_scenario(scen, tmp_path / "out", plot=False, record_mcap=False)
     assert _summary(tmp_path / "out")["status"] == "interrupted"
     assert np.isclose(_summary(tmp_path / "out")["simulated_time_s"], 0.2)
+
+
+SWEEP_CONTROLLERS = """
+import time
+from pathlib import Path
+
+def quick(obs):
+    return (0.05, 0.0, 0.0)
+
+def slow(obs):
+    Path(__file__).with_name("started").touch()
+    time.sleep(0.02)
+    return (0.05, 0.0, 0.0)
+"""
+
+
+def test_sigterm_stops_a_sweep_like_ctrl_c_and_keeps_finished_runs(tmp_path):
+    (tmp_path / "ctrl.py").write_text(SWEEP_CONTROLLERS)
+    base = yaml_load(SCENARIO.format(duration=20.0))
+    sweep = {
+        "name": "stopped",
+        "base": base,
+        "vary": {"robots.0.controller.name": ["quick", "slow"]},
+        "out": str(tmp_path / "out"),
+    }
+    (tmp_path / "sweep.yaml").write_text(yaml_dump(sweep))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "agvsim.cli", "sweep", str(tmp_path / "sweep.yaml"),
+         "--workers", "1", "-q", "--no-plot"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 240
+        while not (tmp_path / "started").exists():
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "the slow run did not start"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 143, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr, stderr
+    kept = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
+    assert len(kept) == 1 and kept[0].endswith(".json"), kept  # the quick run, done before
+
+
+def test_a_hanging_controller_ends_its_sweep_or_grading_run_not_the_whole_job(tmp_path):
+    from agvsim.experiments.runs import RunTask, execute
+
+    (tmp_path / "ctrl.py").write_text(HANGS.format(body="time.sleep(3600)"))
+    data = yaml_load(SCENARIO.format(duration=5.0))
+    task = RunTask("r0", 0, 0, data, str(tmp_path), "test", controller_time_limit_s=0.3)
+    t0 = time.monotonic()
+    row = execute(task)
+    assert time.monotonic() - t0 < 60
+    assert row["status"] == "controller_error"  # a finished run: its row is kept
+    assert "time limit of 0.3 s" in row["error"] and row["simulated_time_s"] == pytest.approx(0.2)

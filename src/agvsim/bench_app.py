@@ -96,7 +96,7 @@ def run_app_benchmark(
                     "framereceived", lambda _f: counts.__setitem__("ws", counts["ws"] + 1)
                 ),
             )
-            page.goto(f"http://127.0.0.1:{app.port}/")
+            page.goto(app.url)
             page.get_by_role("tab", name="Run").wait_for(timeout=60000)
             page.wait_for_timeout(3000)
             page.evaluate(

@@ -57,9 +57,13 @@ def serve(
     out_dir: Annotated[
         Path, typer.Option("--out", help="Output folder of the app's videos (video_1, ...).")
     ] = Path("runs/app"),
+    max_upload_mb: Annotated[
+        float,
+        typer.Option(help="Most MB a file sent from the browser may have.", min=0.001, max=4096),
+    ] = 10.0,
 ) -> None:
     """Open the browser app: 3D view, the robot mask, run controls, video, maze editor,
-    plots."""
+    plots. Only a browser that opens the printed address (with its token) gets in."""
     from agvsim.scenario import ScenarioError
 
     try:
@@ -69,8 +73,7 @@ def serve(
         raise typer.Exit(1) from None
 
     def ready(a) -> None:
-        where = f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{a.port}"
-        out.print(f"agvsim app on [bold]{where}[/bold]  (Ctrl-C stops it)")
+        out.print(f"agvsim app on [bold]{a.url}[/bold]  (Ctrl-C stops it)", soft_wrap=True)
         if host not in ("127.0.0.1", "localhost", "::1"):
             err.print(
                 f"warning: listening on {host}: anyone on your network can open it", style="yellow"
@@ -85,6 +88,7 @@ def serve(
             on_ready=ready,
             out_dir=out_dir,
             notify=lambda m: out.print(m, markup=False, highlight=False),
+            max_upload_bytes=int(max_upload_mb * 2**20),
         )
     except ScenarioError as e:
         _fail("error", e)
@@ -107,8 +111,10 @@ def replay(
     from agvsim.record.mcap_reader import RecordingError
 
     def ready(a) -> None:
-        where = f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{a.port}"
-        out.print(f"agvsim replay of {recording} on [bold]{where}[/bold]  (Ctrl-C stops it)")
+        out.print(
+            f"agvsim replay of {recording} on [bold]{a.url}[/bold]  (Ctrl-C stops it)",
+            soft_wrap=True,
+        )
 
     try:
         replay_app(recording, host=host, port=port, speed=speed, play=not paused, on_ready=ready)

@@ -1,7 +1,7 @@
 """The side panel of the browser app: run controls, video recording, the robot mask, the maze
 editor, views, live numbers and plots. Every widget calls into the ``Session``; nothing a
 browser sends is run as code (scenario and map files are parsed as data, python controllers are
-refused)."""
+refused), and an uploaded scenario reads only the files sent with it (agvsim.app.uploads)."""
 
 from __future__ import annotations
 
@@ -161,12 +161,13 @@ class Panel:
             )
         )
         load = gui.add_upload_button(
-            "Load scenario", icon=viser.Icon.UPLOAD, mime_type=".yaml,.yml"
+            "Load scenario",
+            icon=viser.Icon.UPLOAD,
+            mime_type=".yaml,.yml,.zip",
+            hint="a scenario YAML, or a .zip of a scenario and its map files",
         )
         load.on_upload(
-            lambda _: self._world_do(
-                lambda: s.load_yaml(load.value.content.decode("utf-8", "replace"), load.value.name)
-            )
+            lambda _: self._world_do(lambda: s.load_upload(load.value.name, load.value.content))
         )
         gui.add_markdown("**Show**")
         self.beams = gui.add_checkbox("beams", initial_value=True)

@@ -196,10 +196,12 @@ class ReplayApp:
         import viser
 
         from agvsim.app import shapes
+        from agvsim.app.guard import open_viser
         from agvsim.app.scene import SceneView
 
-        self.session, self.fps = session, fps
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.session, self.fps, self.host = session, fps, host
+        # only the browser given the token (self.url) gets in (agvsim.app.guard)
+        self.server, self.guard = open_viser(host, port)
         self.server.gui.set_panel_label(f"agvsim replay: {session.path.name}")
         self.scene = SceneView(self.server, session)  # type: ignore[arg-type]
         gui = self.server.gui
@@ -261,6 +263,13 @@ class ReplayApp:
     @property
     def port(self) -> int:
         return self.server.get_port()
+
+    @property
+    def url(self) -> str:
+        """The address to open, with this launch's token."""
+        from agvsim.app.guard import app_url
+
+        return app_url(self.host, self.port, self.guard.token)
 
     def start(self) -> ReplayApp:
         self._thread = threading.Thread(target=self._loop, daemon=True, name="replay")

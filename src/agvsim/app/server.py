@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Protocol, TypeVar
 
 from agvsim.app.session import DEFAULT_OUT, Session
+from agvsim.app.uploads import DEFAULT_MAX_UPLOAD_BYTES, UploadLimits, refuse_large_uploads
 from agvsim.scenario import Scenario, load_scenario
 from agvsim.signals import terminate_as_interrupt
 
@@ -44,13 +45,13 @@ class App:
         verbose: bool = False,
         notify: Callable[[str], None] = print,
     ):
-        import viser
-
+        from agvsim.app.guard import open_viser
         from agvsim.app.panel import Panel
         from agvsim.app.scene import SceneView
 
-        self.session, self.fps, self.notify = session, fps, notify
-        self.server = viser.ViserServer(host=host, port=port, verbose=verbose)
+        self.session, self.fps, self.notify, self.host = session, fps, notify, host
+        # only the browser given the token (self.url) gets in (agvsim.app.guard)
+        self.server, self.guard = open_viser(host, port, verbose)
         self.server.gui.set_panel_label("agvsim")
         self.scene = SceneView(self.server, session)
         self.panel = Panel(self.server, session, self.scene, notify)
@@ -59,10 +60,24 @@ class App:
         self._threads: list[threading.Thread] = []
         self.server.on_client_connect(self._connected)
         self.server.on_client_disconnect(self._disconnected)
+        refuse_large_uploads(self.server, lambda: session.upload_limits, self._tell)
 
     @property
     def port(self) -> int:
         return self.server.get_port()
+
+    @property
+    def url(self) -> str:
+        """The address to open, with this launch's token."""
+        from agvsim.app.guard import app_url
+
+        return app_url(self.host, self.port, self.guard.token)
+
+    def _tell(self, client_id: int, message: str) -> None:
+        """Show ``message`` as a notification in one browser tab."""
+        client = self.server.get_clients().get(client_id)
+        if client is not None:
+            client.add_notification("Upload refused", message, color="red", auto_close_seconds=10.0)
 
     def _connected(self, client) -> None:
         self.panel._set_view(client, self.panel.view.value)
@@ -182,9 +197,13 @@ def serve(
     on_ready: Callable[[App], None] | None = None,
     out_dir: str | Path = DEFAULT_OUT,
     notify: Callable[[str], None] = print,
+    max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
 ) -> None:
-    """Run the app until Ctrl-C (or SIGTERM); a video being recorded is finished first."""
-    app = App(open_session(scenario, out_dir), host=host, port=port, notify=notify).start()
+    """Run the app until Ctrl-C (or SIGTERM); a video being recorded is finished first.
+    ``max_upload_bytes``: the most one file sent from a browser may have."""
+    session = open_session(scenario, out_dir)
+    session.upload_limits = UploadLimits(max_upload_bytes, max_unpacked_bytes=4 * max_upload_bytes)
+    app = App(session, host=host, port=port, notify=notify).start()
     if play:
         app.session.play()
     run_until_stopped(app, on_ready)

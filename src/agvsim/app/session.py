@@ -19,6 +19,7 @@ the live simulation in place.
 from __future__ import annotations
 
 import copy
+import tempfile
 import threading
 import time
 from collections import deque
@@ -29,8 +30,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
+from agvsim.app import uploads
 from agvsim.control.teleop import Teleop
-from agvsim.scenario import Scenario, ScenarioError, build, parse_scenario
+from agvsim.scenario import Scenario, ScenarioError, build, load_scenario, parse_scenario
 from agvsim.sim.engine import ControllerError, Simulation
 from agvsim.world import loaders, mazes
 from agvsim.world.grid import OccupancyGrid
@@ -78,6 +80,7 @@ class Session:
         self.out_dir = Path(out_dir)  # where "Record video" puts its folders
         self.base_dir = scenario._base_dir
         self.allow_python = allow_python
+        self.upload_limits = uploads.UploadLimits()  # agvsim serve --max-upload-mb
         self.config: dict[str, Any] = scenario.model_dump(mode="json", exclude_unset=True)
         # python controllers run only as the command-line scenario names them (file, name)
         self._trusted_python = (
@@ -111,17 +114,21 @@ class Session:
         sc = parse_scenario(copy.deepcopy(cfg), self.source)
         sc._base_dir = self.base_dir
         sc._source = self.source
+        self._refuse_python(sc, self.source, self._trusted_python)
+        return sc
+
+    @staticmethod
+    def _refuse_python(sc: Scenario, source: str, trusted: set[tuple[str, str]]) -> None:
         for r in sc.robots:
             c = r.controller
-            if c.type == "python" and (c.file, c.name) not in self._trusted_python:
+            if c.type == "python" and (c.file, c.name) not in trusted:
                 raise ScenarioError(
-                    self.source,
+                    source,
                     [
                         f"robot {r.name!r}: python controllers cannot come from the browser; "
                         "only those of the scenario given on the command line run"
                     ],
                 )
-        return sc
 
     def _build(self, cfg: dict[str, Any]) -> Simulation:
         return build(self._scenario(cfg))
@@ -528,13 +535,7 @@ class Session:
 
     def _set_grid(self, grid: OccupancyGrid) -> None:
         self.sim.set_grid(grid)
-        world = dict(self.config["world"])
-        for k in ("maze", "matrix", "picture", "file", "random"):
-            world.pop(k, None)
-        world["picture"] = loaders.format_text_picture(grid)
-        world["cell_size_m"] = grid.resolution_m
-        world["origin_xy_m"] = list(grid.origin_xy_m)
-        self.config = {**self.config, "world": world}
+        self.config = {**self.config, "world": _world_with_grid(self.config["world"], grid)}
         self.world_version += 1
 
     def _unstick_robots(self) -> None:
@@ -562,8 +563,6 @@ class Session:
 
     def save_grid(self, fmt: str) -> tuple[str, bytes]:
         """The map as a file to download: (file name, bytes) for fmt txt, csv or png."""
-        import tempfile
-
         savers = {"txt": loaders.save_text, "csv": loaders.save_csv, "png": loaders.save_png}
         if fmt not in savers:
             raise EditError(f"unknown map format {fmt!r}; choose txt, csv or png")
@@ -576,8 +575,7 @@ class Session:
 
     def load_grid(self, name: str, content: bytes) -> None:
         """A map file sent from the browser (txt, csv, png, pgm): read as data, never run."""
-        import tempfile
-
+        self.upload_limits.check_size(name, len(content))
         suffix = Path(name).suffix.lower()
         if suffix not in (".txt", ".csv", ".png", ".pgm"):
             raise EditError(f"{name}: maps load from .txt, .csv, .png or .pgm files")
@@ -602,30 +600,60 @@ class Session:
             cfg["robots"][k]["controller"] = self._saved_controller
         return yaml.dump(cfg, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=100)
 
-    def load_yaml(self, text: str, source: str = "uploaded scenario") -> None:
-        """Replace everything with a scenario file's content (YAML is parsed as data only)."""
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as err:
-            raise ScenarioError(source, [f"not valid YAML ({err})"]) from None
-        if not isinstance(data, dict):
-            raise ScenarioError(source, ["the file must hold a mapping of keys"])
-        with self.lock:
-            saved, trusted = self.source, self._trusted_python
-            self.source, self._trusted_python = source, set()  # nothing from a browser runs
+    def load_yaml(self, text: str, source: str = "uploaded scenario.yaml") -> None:
+        """Replace everything with a scenario file's content (see :meth:`load_upload`)."""
+        name = source if source.lower().endswith(uploads.SCENARIO_SUFFIXES) else "scenario.yaml"
+        self.load_upload(name, text.encode("utf-8"))
+
+    def load_upload(self, name: str, content: bytes) -> None:
+        """Replace everything with a scenario sent from the browser: a YAML file, or a .zip
+        of a scenario and its map files (agvsim.app.uploads). It is parsed as data by the
+        scenario loader, with its limits; it may read only the files sent with it and run no
+        python controller. A refused upload raises (ScenarioError, UploadError) and leaves
+        the running simulation as it was; it is checked and built before the lock is taken,
+        so the simulation runs on meanwhile."""
+        bundle = uploads.unpack(name, content, self.upload_limits)
+        with tempfile.TemporaryDirectory(prefix="agvsim-upload-") as tmp:
+            folder = Path(tmp)
+            path = bundle.write(folder)
+
+            def hide(problems: list[str]) -> list[str]:  # no server path in a message
+                return [p.replace(f"{folder}/", "").replace(str(folder), ".") for p in problems]
+
             try:
-                sim = self._build(data)
-            except ScenarioError:
-                self._trusted_python = trusted
+                sc = load_scenario(path)
+                uploads.check_references(sc.world.file, bundle)
+                self._refuse_python(sc, bundle.scenario, set())  # nothing from a browser runs
+                sim = build(sc)
+            except ScenarioError as err:
+                raise ScenarioError(bundle.scenario, hide(err.problems)) from None
+            except uploads.UploadError:
                 raise
-            finally:
-                self.source = saved
-            self.config, self.sim = data, sim
+            except (ControllerError, ValueError, RecursionError) as err:  # data a parser choked on
+                problem = f"cannot be loaded: {type(err).__name__}: {err}"
+                raise ScenarioError(bundle.scenario, hide([problem])) from None
+        config: dict[str, Any] = sc.model_dump(mode="json", exclude_unset=True)
+        if sc.world.file is not None:  # the map is part of the scenario now: no file kept
+            config["world"] = _world_with_grid(config["world"], sim.world.grid)
+        with self.lock:
+            self.source, self._trusted_python = bundle.scenario, set()
+            self.config, self.sim = config, sim
             self.keyboard_robot, self._saved_controller = None, None
             self.playing, self.error = False, None
             self.layout += 1
             self.world_version += 1
             self._reset_history()
+
+
+def _world_with_grid(world: dict[str, Any], grid: OccupancyGrid) -> dict[str, Any]:
+    """A world config whose map is ``grid``, written inline as a text picture."""
+    out = dict(world)
+    for k in ("maze", "matrix", "picture", "file", "random"):
+        out.pop(k, None)
+    out["picture"] = loaders.format_text_picture(grid)
+    out["cell_size_m"] = grid.resolution_m
+    out["origin_xy_m"] = list(grid.origin_xy_m)
+    return out
 
 
 PALETTE = ["#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf"]
