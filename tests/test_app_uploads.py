@@ -235,12 +235,12 @@ def test_a_refused_upload_leaves_the_running_simulation_untouched(live, case):
 )
 def test_a_yaml_bomb_upload_is_refused_in_time(tmp_path):
     levels = ['a: &a ["x","x","x","x","x","x","x","x","x","x"]']
-    for k in "bcdefgh":
+    for k in "bcdefghi":  # 10**9 leaves once expanded
         prev = chr(ord(k) - 1)
         levels.append(f"{k}: &{k} [" + ",".join([f"*{prev}"] * 10) + "]")
     bomb = "\n".join(
         ["name: bomb", *levels, "world: {maze: thesis_c1}", "robots:", "  - name: r",
-         "    model: differential", "    controller: {type: script, steps: *h}"]
+         "    model: differential", "    controller: {type: script, steps: *i}"]
     )  # fmt: skip
     script = textwrap.dedent(
         """

@@ -405,3 +405,51 @@ def test_a_hanging_controller_ends_its_sweep_or_grading_run_not_the_whole_job(tm
     assert time.monotonic() - t0 < 60
     assert row["status"] == "controller_error"  # a finished run: its row is kept
     assert "time limit of 0.3 s" in row["error"] and row["simulated_time_s"] == pytest.approx(0.2)
+
+
+GRADED = """
+import os, time
+from pathlib import Path
+
+def controller(obs):
+    Path(__file__).with_name("task.pid").write_text(str(os.getpid()))
+    time.sleep(0.05)
+    return (0.1, 0.0, 0.0)
+"""
+
+
+def test_sigterm_stops_grading_and_its_task_process(tmp_path):
+    (tmp_path / "student.py").write_text(GRADED)
+    room = {
+        "world": {"picture": "############\n#..........#\n#..........#\n############"},
+        "robots": [{"name": "agv", "model": "differential", "pose": {"x_m": -3.0, "y_m": 0.0}}],
+    }
+    suite = {
+        "name": "stopped",
+        "time_limit_s": 600,
+        "tasks": [{"name": "long", "scenario": room, "duration_s": 1000,
+                   "goal": {"reach": {"x_m": 4.0, "y_m": 0.0}}}],
+    }  # fmt: skip
+    (tmp_path / "suite.yaml").write_text(yaml_dump(suite))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "agvsim.cli", "grade", str(tmp_path / "student.py"),
+         "--suite", str(tmp_path / "suite.yaml"), "--out", str(tmp_path / "out"), "-q"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    pid_file = tmp_path / "task.pid"
+    try:
+        deadline = time.monotonic() + 240
+        while not pid_file.exists() or not pid_file.read_text():
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "the task did not start"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 143, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr, stderr
+    task_pid = int(pid_file.read_text())
+    assert not Path(f"/proc/{task_pid}").exists()  # the task's process went with it

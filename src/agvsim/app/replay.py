@@ -203,6 +203,7 @@ class ReplayApp:
         # only the browser given the token (self.url) gets in (agvsim.app.guard)
         self.server, self.guard = open_viser(host, port)
         self.server.gui.set_panel_label(f"agvsim replay: {session.path.name}")
+        self.server.gui.configure_theme(show_share_button=False)  # no public tunnel: offline
         self.scene = SceneView(self.server, session)  # type: ignore[arg-type]
         gui = self.server.gui
         s = session
