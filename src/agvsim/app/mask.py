@@ -18,6 +18,7 @@ from typing import Any, Literal
 import yaml
 
 from agvsim.kinematics import MODELS
+from agvsim.safe_yaml import YamlInputError, load_yaml
 from agvsim.scenario import default_camera_height
 from agvsim.scenario_dynamics import DynamicsConfig
 from agvsim.scenario_schema import ControllerConfig
@@ -249,10 +250,10 @@ def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
     if "controller.type" in values or "controller.settings" in values:
         ctype = values.get("controller.type", robot.get("controller", {}).get("type", "idle"))
         text = values.get("controller.settings", "") or ""
-        try:
-            settings = yaml.safe_load(text) if text.strip() else {}
-        except yaml.YAMLError as err:
-            raise MaskError(f"controller settings: not valid YAML ({err})") from None
+        try:  # the scenario loader's bounded reader (size, depth, aliases)
+            settings = load_yaml(text, "controller settings") if text.strip() else {}
+        except YamlInputError as err:
+            raise MaskError(str(err)) from None
         if not isinstance(settings, dict):
             raise MaskError(
                 f"controller settings: need 'key: value' lines, got {type(settings).__name__}"

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-import yaml
+from agvsim.safe_yaml import YamlInputError, load_yaml
 
 SCENARIO_SUFFIXES = (".yaml", ".yml")
 DEFAULT_MAX_UPLOAD_BYTES = 10 * 2**20  # agvsim serve --max-upload-mb
@@ -141,9 +141,9 @@ def check_references(world_file: str | None, bundle: Bundle) -> None:
     if not name.lower().endswith(SCENARIO_SUFFIXES):
         return
     # a ROS map: its YAML names the image, relative to the YAML's folder
-    try:
-        doc: Any = yaml.safe_load(bundle.files[name])
-    except yaml.YAMLError:
+    try:  # the scenario loader's bounded reader: an uploaded map YAML may be a bomb too
+        doc: Any = load_yaml(bundle.files[name], name)
+    except YamlInputError:
         return  # the map loader reports what is wrong with the YAML, naming the line
     image = doc.get("image") if isinstance(doc, dict) else None
     if image is None:
