@@ -212,18 +212,21 @@ def test_huge_finite_numbers_are_refused():
     with pytest.raises(ScenarioError) as info:
         parse_scenario(data)
     assert info.value.problems == [
-        "robots[0].sensors[0].lidar.angle_min_deg: too large (allowed: magnitude <= 1e+12) "
-        "(got -1e+300)",
-        "robots[0].controller.goto_goal.goal_x_m: too large (allowed: magnitude <= 1e+12) "
+        "robots[0].sensors[0].angle_min_deg: too large (allowed: magnitude <= 1e+12) (got -1e+300)",
+        "robots[0].controller.goal_x_m: too large (allowed: magnitude <= 1e+12) "
         "(got 10000000000000.0)",
     ]
-    data["robots"][0]["params"] = {"wheel_radius_m": 10**400}  # no float holds it
-    with pytest.raises(ScenarioError, match=r"params: wheel_radius_m: too large"):
-        parse_scenario(data)
-    del data["robots"][0]["params"]
     data["robots"][0]["controller"]["goal_x_m"] = 1e12  # the bound itself is allowed
     data["robots"][0]["sensors"][0]["angle_min_deg"] = -45.0
     assert parse_scenario(data).robots[0].controller.goal_x_m == 1e12
+    data["robots"][0]["params"] = {"wheel_radius_m": 10**400}  # no float holds it
+    with pytest.raises(ScenarioError, match=r"params: wheel_radius_m: too large"):
+        parse_scenario(data)
+    # every block alike, those of other modules too (checked before validation)
+    data["robots"][0]["params"] = {}
+    data["robots"][0]["dynamics"] = {"mass_kg": 1e300}
+    with pytest.raises(ScenarioError, match=r"robots\[0\]\.dynamics\.mass_kg: too large"):
+        parse_scenario(data)
 
 
 def test_names_and_problem_count_are_bounded():
