@@ -177,7 +177,7 @@ def test_sensor_rates():
     parse_scenario(data, limits=Limits(max_camera_pixels_per_s=320 * 240 * 50))
 
 
-def test_an_untrusted_file_cannot_raise_its_limits():
+def test_an_untrusted_file_cannot_raise_its_limits(tmp_path):
     data = _scenario(duration_s=50, dt_s=1e-6, limits={"max_steps": 50_000_000})
     with pytest.raises(ScenarioError, match="cannot raise its own limits"):
         parse_scenario(data, limits_from_file=False)
@@ -188,6 +188,11 @@ def test_an_untrusted_file_cannot_raise_its_limits():
         scenario_from_text(text, "upload")
     with pytest.raises(ScenarioError, match="yaml_max_nodes"):
         scenario_from_text((BAD / "alias_bomb_robots.yaml").read_bytes(), "upload")
+    path = tmp_path / "upload.yaml"
+    path.write_text(text, encoding="utf-8")
+    assert load_scenario(path)._limits.max_steps == 50_000_000  # from the command line: trusted
+    with pytest.raises(ScenarioError, match="cannot raise its own limits"):
+        load_scenario(path, limits_from_file=False)
 
 
 def test_limits_from_options():

@@ -148,9 +148,13 @@ def _huge_floats(data: Any) -> list[str]:
     return out
 
 
-def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
+def load_scenario(
+    path: str | Path, limits: Limits | None = None, *, limits_from_file: bool = True
+) -> Scenario:
     """Read and validate a scenario YAML file (UTF-8, within ``limits``; see
-    :mod:`agvsim.scenario_limits`)."""
+    :mod:`agvsim.scenario_limits`). A file from an untrusted place (a browser upload) is
+    read with ``limits_from_file=False``: its ``limits:`` block may lower limits, not raise
+    them."""
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(
@@ -166,7 +170,7 @@ def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
         data = load_yaml_file(path, limits.yaml)
     except YamlInputError as err:
         raise ScenarioError(str(path), [_yaml_problem(err)]) from None
-    scenario = parse_scenario(data, str(path), limits)
+    scenario = parse_scenario(data, str(path), limits, limits_from_file=limits_from_file)
     scenario._base_dir = path.parent
     scenario._source = str(path)
     return scenario
