@@ -168,6 +168,7 @@ BASES: list[dict[str, Any]] = [
                     {"type": "camera", "width_px": 16, "height_px": 12, "rate_hz": 5},
                 ],
                 "controller": {"type": "avoid", "trigger_m": 0.5},
+                "dynamics": {"mass_kg": 30.0, "load": {"mass_kg": 5.0, "x_m": 0.1}},
             }
         ],
     },

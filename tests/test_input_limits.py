@@ -177,7 +177,7 @@ def test_sensor_rates():
     parse_scenario(data, limits=Limits(max_camera_pixels_per_s=320 * 240 * 50))
 
 
-def test_an_untrusted_file_cannot_raise_its_limits():
+def test_an_untrusted_file_cannot_raise_its_limits(tmp_path):
     data = _scenario(duration_s=50, dt_s=1e-6, limits={"max_steps": 50_000_000})
     with pytest.raises(ScenarioError, match="cannot raise its own limits"):
         parse_scenario(data, limits_from_file=False)
@@ -188,6 +188,11 @@ def test_an_untrusted_file_cannot_raise_its_limits():
         scenario_from_text(text, "upload")
     with pytest.raises(ScenarioError, match="yaml_max_nodes"):
         scenario_from_text((BAD / "alias_bomb_robots.yaml").read_bytes(), "upload")
+    path = tmp_path / "upload.yaml"
+    path.write_text(text, encoding="utf-8")
+    assert load_scenario(path)._limits.max_steps == 50_000_000  # from the command line: trusted
+    with pytest.raises(ScenarioError, match="cannot raise its own limits"):
+        load_scenario(path, limits_from_file=False)
 
 
 def test_limits_from_options():
@@ -212,18 +217,21 @@ def test_huge_finite_numbers_are_refused():
     with pytest.raises(ScenarioError) as info:
         parse_scenario(data)
     assert info.value.problems == [
-        "robots[0].sensors[0].lidar.angle_min_deg: too large (allowed: magnitude <= 1e+12) "
-        "(got -1e+300)",
-        "robots[0].controller.goto_goal.goal_x_m: too large (allowed: magnitude <= 1e+12) "
+        "robots[0].sensors[0].angle_min_deg: too large (allowed: magnitude <= 1e+12) (got -1e+300)",
+        "robots[0].controller.goal_x_m: too large (allowed: magnitude <= 1e+12) "
         "(got 10000000000000.0)",
     ]
-    data["robots"][0]["params"] = {"wheel_radius_m": 10**400}  # no float holds it
-    with pytest.raises(ScenarioError, match=r"params: wheel_radius_m: too large"):
-        parse_scenario(data)
-    del data["robots"][0]["params"]
     data["robots"][0]["controller"]["goal_x_m"] = 1e12  # the bound itself is allowed
     data["robots"][0]["sensors"][0]["angle_min_deg"] = -45.0
     assert parse_scenario(data).robots[0].controller.goal_x_m == 1e12
+    data["robots"][0]["params"] = {"wheel_radius_m": 10**400}  # no float holds it
+    with pytest.raises(ScenarioError, match=r"params: wheel_radius_m: too large"):
+        parse_scenario(data)
+    # every block alike, those of other modules too (checked before validation)
+    data["robots"][0]["params"] = {}
+    data["robots"][0]["dynamics"] = {"mass_kg": 1e300}
+    with pytest.raises(ScenarioError, match=r"robots\[0\]\.dynamics\.mass_kg: too large"):
+        parse_scenario(data)
 
 
 def test_names_and_problem_count_are_bounded():

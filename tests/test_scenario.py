@@ -145,7 +145,7 @@ CASES = [
     (
         "huge_goal_cell.yaml",
         r"robots\[0\]\.controller(\.maze_solver)?\.goal_cell\[0\]",
-        ["exceeded maximum size", "1e+40"],
+        ["too large (allowed: magnitude <= 1e+12)", "1e+40"],
     ),
     (
         "tiny_dt.yaml",

@@ -28,7 +28,13 @@ from agvsim.dynamics.vehicle import check_dynamics
 from agvsim.kinematics import MODELS, stack_models, wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
 from agvsim.scenario_dynamics import dynamics_spec, floor_spec
-from agvsim.scenario_limits import Limits, check_grid_cells, check_robot_count, check_scenario
+from agvsim.scenario_limits import (
+    MAX_MAGNITUDE,
+    Limits,
+    check_grid_cells,
+    check_robot_count,
+    check_scenario,
+)
 from agvsim.scenario_schema import (
     AvoidConfig,
     CameraConfig,
@@ -41,6 +47,7 @@ from agvsim.scenario_schema import (
     WorldConfig,
     _did_you_mean,
     _format_errors,
+    _loc,
 )
 from agvsim.scenario_schema import _models_in as _models_in  # re-exported
 from agvsim.sensors.camera import CameraSpec
@@ -91,6 +98,9 @@ def parse_scenario(
     except YamlInputError as err:
         raise ScenarioError(source, [_yaml_problem(err)]) from None
     _count_robots_first(data, limits, limits_from_file, source)
+    huge = _huge_floats(data)
+    if huge:  # every block (controllers, dynamics, fleet, metrics) alike, before validation
+        raise ScenarioError(source, huge)
     try:
         sc = Scenario.model_validate(data)
     except ValidationError as err:
@@ -119,9 +129,32 @@ def _count_robots_first(data: dict, limits: Limits, from_file: bool, source: str
         raise ScenarioError(source, [str(err)]) from None
 
 
-def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
+def _huge_floats(data: Any) -> list[str]:
+    """One line per float of magnitude above MAX_MAGNITUDE in the raw data (at most 30)."""
+    out: list[str] = []
+    stack: list[tuple[Any, tuple]] = [(data, ())]
+    while stack and len(out) < 30:
+        node, where = stack.pop()
+        if isinstance(node, float):
+            if abs(node) > MAX_MAGNITUDE and math.isfinite(node):  # NaN / inf: the schema's
+                out.append(
+                    f"{_loc(where)}: too large (allowed: magnitude <= {MAX_MAGNITUDE:g}) "
+                    f"(got {node!r})"
+                )
+        elif isinstance(node, dict):
+            stack.extend(reversed([(v, (*where, str(k))) for k, v in node.items()]))
+        elif isinstance(node, list | tuple):
+            stack.extend(reversed([(v, (*where, i)) for i, v in enumerate(node)]))
+    return out
+
+
+def load_scenario(
+    path: str | Path, limits: Limits | None = None, *, limits_from_file: bool = True
+) -> Scenario:
     """Read and validate a scenario YAML file (UTF-8, within ``limits``; see
-    :mod:`agvsim.scenario_limits`)."""
+    :mod:`agvsim.scenario_limits`). A file from an untrusted place (a browser upload) is
+    read with ``limits_from_file=False``: its ``limits:`` block may lower limits, not raise
+    them."""
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(
@@ -137,7 +170,7 @@ def load_scenario(path: str | Path, limits: Limits | None = None) -> Scenario:
         data = load_yaml_file(path, limits.yaml)
     except YamlInputError as err:
         raise ScenarioError(str(path), [_yaml_problem(err)]) from None
-    scenario = parse_scenario(data, str(path), limits)
+    scenario = parse_scenario(data, str(path), limits, limits_from_file=limits_from_file)
     scenario._base_dir = path.parent
     scenario._source = str(path)
     return scenario
