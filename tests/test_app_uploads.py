@@ -207,6 +207,17 @@ BAD_UPLOADS = {
         "s.yaml",
         yaml.safe_dump(scenario({"random": {"rows": 50001, "cols": 50001}})).encode(),
     ),
+    "a limits: block raising its own limits": (
+        "s.yaml",
+        yaml.safe_dump(
+            {
+                **scenario({"picture": ROOM}),
+                "duration_s": 1e6,
+                "dt_s": 0.001,
+                "limits": {"max_steps": 10**12},
+            }  # fmt: skip
+        ).encode(),
+    ),
     "too many files": ("many.zip", _zip({f"f{i}.txt": "x" for i in range(65)})),
     "two scenarios": ("two.zip", _zip({"a.yaml": "name: a", "b.yaml": "name: b"})),
     "a path in the zip": ("evil.zip", _zip({"../scenario.yaml": "name: a"})),

@@ -395,3 +395,17 @@ def test_the_static_distance_field_stays_bounded_on_a_huge_map():
     # the top row of cells is wall: 1 km north of the centre is 50 m from it (within a sample)
     d = static.distance_m(np.array([0.0]), np.array([850.0]))
     assert d[0] == pytest.approx(50.0, abs=1.5)
+
+
+@pytest.mark.parametrize("command", [["sweep"], ["grade", "ctrl.py", "--suite"]])
+def test_sweep_and_suite_files_are_read_within_the_yaml_budget(tmp_path, command):
+    """Sweep and grading-suite files go through the scenario loader's bounded reader: an alias
+    bomb (10^7 values once expanded) is refused naming the line, not expanded."""
+    levels = ['a: &a ["x","x","x","x","x","x","x","x","x","x"]']
+    for k in "bcdefg":
+        prev = chr(ord(k) - 1)
+        levels.append(f"{k}: &{k} [" + ",".join([f"*{prev}"] * 10) + "]")
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text("\n".join(levels) + "\n")
+    rc, text = _cli(*command, str(bomb))
+    assert rc == 2 and "line 6: the document holds more than 250,000 values" in text

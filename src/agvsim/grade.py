@@ -33,10 +33,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from agvsim.experiments.runs import RunTask, execute
+from agvsim.safe_yaml import YamlInputError, load_yaml_file
 from agvsim.scenario import ScenarioError, build, parse_scenario
 
 STARTUP_LIMIT_S = 120.0  # a task's process must have imported agvsim within this
@@ -159,12 +159,11 @@ def load_suite(path: str | Path) -> tuple[SuiteConfig, list[PreparedTask]]:
     path = Path(path)
     if not path.is_file():
         raise SuiteError(str(path), ["no such file"])
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        line = f"line {mark.line + 1}: " if mark is not None else ""
-        raise SuiteError(str(path), [f"{line}not valid YAML"]) from None
+    try:  # the scenario loader's bounded reader (UTF-8, size, depth, aliases)
+        data = load_yaml_file(path)
+    except YamlInputError as err:
+        line = f"line {err.line}: " if err.line is not None else ""
+        raise SuiteError(str(path), [f"{line}{err.problem}"]) from None
     if not isinstance(data, dict):
         raise SuiteError(str(path), ["the file must hold a mapping of keys"])
     try:
@@ -193,7 +192,10 @@ def _prepare(cfg: SuiteConfig, task: TaskConfig, here: Path) -> PreparedTask:
         file = file if file.is_absolute() else here / file
         if not file.is_file():
             raise ValueError(f"scenario: no such file {str(file)!r}")
-        data, base_dir = yaml.safe_load(file.read_text(encoding="utf-8")), file.parent
+        try:
+            data, base_dir = load_yaml_file(file), file.parent
+        except YamlInputError as err:
+            raise ValueError(f"scenario: {err}") from None
         if not isinstance(data, dict):
             raise ValueError(f"scenario: {file} does not hold a scenario mapping")
     robots = data.get("robots") or []

@@ -621,7 +621,8 @@ class Session:
                 return [p.replace(f"{folder}/", "").replace(str(folder), ".") for p in problems]
 
             try:
-                sc = load_scenario(path)
+                # its limits: block may lower the limits, never raise them
+                sc = load_scenario(path, limits_from_file=False)
                 uploads.check_references(sc.world.file, bundle)
                 self._refuse_python(sc, bundle.scenario, set())  # nothing from a browser runs
                 sim = build(sc)

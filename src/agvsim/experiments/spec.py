@@ -34,11 +34,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from agvsim.experiments.paths import PathError, set_path, split_path
 from agvsim.experiments.runs import RunTask, dry_row
+from agvsim.safe_yaml import YamlInputError, load_yaml_file
 from agvsim.scenario import Scenario, ScenarioError, build, parse_scenario
 from agvsim.scenario_schema import PythonControllerConfig as PythonController
 
@@ -148,13 +148,11 @@ def load_sweep(path: str | Path) -> tuple[SweepConfig, Path]:
     path = Path(path)
     if not path.is_file():
         raise SweepError(str(path), ["no such file"])
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        line = f"line {mark.line + 1}: " if mark is not None else ""
-        problem = getattr(err, "problem", err)
-        raise SweepError(str(path), [f"{line}not valid YAML ({problem})"]) from None
+    try:  # the scenario loader's bounded reader (UTF-8, size, depth, aliases)
+        data = load_yaml_file(path)
+    except YamlInputError as err:
+        line = f"line {err.line}: " if err.line is not None else ""
+        raise SweepError(str(path), [f"{line}{err.problem}"]) from None
     return parse_sweep(data, str(path)), path
 
 
@@ -210,11 +208,10 @@ def _base(cfg: SweepConfig, source: str, here: Path) -> tuple[dict, Path]:
     if not path.is_file():
         raise SweepError(source, [f"base: no such scenario file {str(path)!r}"])
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        line = f" line {mark.line + 1}" if mark is not None else ""
-        raise SweepError(source, [f"base: {path}{line}: not valid YAML"]) from None
+        data = load_yaml_file(path)
+    except YamlInputError as err:
+        line = f" line {err.line}" if err.line is not None else ""
+        raise SweepError(source, [f"base: {path}{line}: {err.problem}"]) from None
     if not isinstance(data, dict):
         raise SweepError(source, [f"base: {path} does not hold a scenario mapping"])
     return data, path.parent
