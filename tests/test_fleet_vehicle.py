@@ -375,3 +375,31 @@ def test_same_seed_same_messages(tmp_path: Path) -> None:
         r.step(200)
         out.append(r.sent["agv1"])
     assert out[0] == out[1]
+
+
+def test_an_empty_battery_stops_the_vehicle_until_charged(tmp_path: Path) -> None:
+    grid = parse_text_picture(ROOM, 1.0, None)
+    lay = layout_from_grid(grid, ["agvsim.differential"], "room")
+    offer = ({"actionType": "startCharging", "blockingType": "HARD"},)
+    nodes = dict(lay.nodes)
+    nodes["r4c2"] = dataclasses.replace(
+        lay.nodes["r4c2"], types={"agvsim.differential": NodeProps(None, offer)}
+    )
+    save_lif(tmp_path / "room.lif.json", [dataclasses.replace(lay, nodes=nodes)])
+    r = make(tmp_path, layout="{file: room.lif.json}")
+    b = r.v().battery
+    b.charge_pct = 0.06  # about a metre left
+    r.v().receive("order", order(r.fleet.layout, ROW4))
+    r.until(lambda: b.empty, 10, "an empty battery")
+    r.step(20)
+    s = r.last_state()
+    assert s["errors"][-1]["errorType"] == "batteryEmpty" and not s["driving"]
+    assert s["lastNodeId"] == "r4c2"  # it got one edge far (1 m at 0.05 %/m)
+    here = r.pose()
+    r.step(20)
+    assert np.allclose(r.pose(), here)
+    r.v().receive("instantActions", instant(("ch", "startCharging")))
+    r.until(lambda: b.charge_pct > 1.0, 10, "charge")
+    r.v().receive("instantActions", instant(("st", "stopCharging")))
+    r.until(lambda: r.v().last_node.node_id == "r4c5", 20, "the rest of the order")
+    assert r.last_state()["errors"] == []

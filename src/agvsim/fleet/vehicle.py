@@ -522,6 +522,8 @@ class Vehicle:
             if not any(e[0] == "run" for e in self.errors):
                 self._error("run", Problem.BATTERY_EMPTY, "the battery is empty", {})
             return stop
+        if any(e[0] == "run" for e in self.errors):
+            self._clear_errors("run")  # charged again
         if not self.route_edges or not self.route_edges[0].released or self.last_node is None:
             return stop
         edge = self.route_edges[0]
