@@ -403,3 +403,17 @@ def test_an_empty_battery_stops_the_vehicle_until_charged(tmp_path: Path) -> Non
     r.v().receive("instantActions", instant(("st", "stopCharging")))
     r.until(lambda: r.v().last_node.node_id == "r4c5", 20, "the rest of the order")
     assert r.last_state()["errors"] == []
+
+
+def test_turning_on_the_spot_keeps_its_circle_clear(tmp_path: Path) -> None:
+    r = make(tmp_path, [("agv1", "differential", "r4c4", 0.0)])
+    # a post 0.34 m from the centre, inside the 0.37 m circle the body sweeps (+5 cm)
+    r.sim.set_boxes(np.array([[0.34, -0.22, 0.0, 0.05, 0.05]]))
+    r.step(3)  # a scan with the post in it
+    r.v().receive("order", order(r.fleet.layout, ["r4c4", "r3c4"]))  # north: turn first
+    r.step(20)
+    s = r.last_state()
+    assert s["safetyState"]["fieldViolation"] and not s["driving"]
+    assert abs(r.pose()[2]) < 1e-9 and r.sim.state.collisions.sum() == 0
+    r.sim.set_boxes(np.zeros((0, 5)))
+    r.until(lambda: r.v().last_node.node_id == "r3c4", 10, "the turn and the edge")

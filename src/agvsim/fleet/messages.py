@@ -140,6 +140,13 @@ def visualization(
 
 
 # ------------------------------------------------------------------------------ factsheet
+def top_speed_m_s(model: Any) -> float:
+    """The fastest straight-ahead speed the model's wheel speed limit allows (m/s)."""
+    wheels = np.abs(np.asarray(model.inverse(np.array([[1.0, 0.0, 0.0]])).speeds)).max()
+    limit = float(np.min(np.asarray(model.max_wheel_speed_rad_s)))
+    return limit / float(wheels) if wheels > 0 else float("inf")
+
+
 def kinematic_kind(model: Any) -> str:
     """VDA 5050's agvKinematic: DIFF, OMNI or THREEWHEEL. Ackermann (no such value in the
     spec) is reported as THREEWHEEL, the nearest: a steered front axle on a bicycle model."""

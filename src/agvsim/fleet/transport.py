@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import resource
 import selectors
+import socket
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -54,6 +55,21 @@ def raise_file_limit(n: int) -> None:
     want = min(hard, max(soft, n + 256)) if hard != resource.RLIM_INFINITY else max(soft, n + 256)
     if want > soft:
         resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
+
+
+def _read_all(c: mqtt.Client, most: int = 1000) -> None:
+    """Read every packet waiting on the socket (paho's loop_read takes one QoS 0 message a
+    call; the fleet receiver gets the orders of every vehicle on one socket)."""
+    for _ in range(most):
+        c.loop_read()
+        sock = c.socket()
+        if not isinstance(sock, socket.socket):
+            return
+        try:
+            if not sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT):
+                return  # closed: paho notices at its next read
+        except OSError:  # BlockingIOError: nothing more to read
+            return
 
 
 class _Link:
@@ -204,7 +220,7 @@ class MqttTransport:
         for key, events in self.sel.select(timeout=max(0.0, timeout_s)):
             c = key.data.client
             if events & selectors.EVENT_READ:
-                c.loop_read()
+                _read_all(c)
             if events & selectors.EVENT_WRITE:
                 c.loop_write()
         now = time.monotonic()

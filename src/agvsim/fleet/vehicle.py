@@ -94,6 +94,8 @@ class Vehicle:
         if epoch is not None:
             self.stamp.epoch = epoch
         self.supported = supported_scopes()
+        # as fast as the configuration allows and the wheels can turn (factsheet speedMax)
+        self.max_speed_m_s = min(cfg.max_speed_m_s, messages.top_speed_m_s(spec.model))
         self.battery = battery or Battery()
         hl, hw = spec.footprint_half_m
         self._front_m = spec.body_offset_x_m + hl
@@ -175,7 +177,7 @@ class Vehicle:
             self.t_s,
             self.spec,
             c.vehicle_type,
-            c.max_speed_m_s,
+            self.max_speed_m_s,
             c.limits,
             c.state_period_s,
             c.vis_period_s,
@@ -497,7 +499,7 @@ class Vehicle:
         self._dirty = True
 
     def _speeds(self, edges: list[OrderEdge]) -> list[float]:
-        v = self.cfg.max_speed_m_s
+        v = self.max_speed_m_s
         return [v if e.max_speed_m_s is None else min(v, e.max_speed_m_s) for e in edges]
 
     def _leg_targets(self) -> tuple[list[OrderNode], list[OrderEdge]]:
@@ -576,7 +578,8 @@ class Vehicle:
         if len(pts) == 0:
             return False
         path = self.leg.ahead(length)
-        if len(path) < 2:  # turning on the spot at a node: the body's own circle
+        if math.hypot(tw[0], tw[1]) < 1e-6 or len(path) < 2:
+            # turning on the spot: the circle the body sweeps (around the reference point)
             r = self.spec.bounding_radius_m + self.cfg.field_side_margin_m
             return bool((np.hypot(*(pts - self.pose[:2]).T) < r).any())
         return safety.violated(pts[:, :2], path[1:], self._half_width_m)
