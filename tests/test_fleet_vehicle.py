@@ -417,3 +417,29 @@ def test_turning_on_the_spot_keeps_its_circle_clear(tmp_path: Path) -> None:
     assert abs(r.pose()[2]) < 1e-9 and r.sim.state.collisions.sum() == 0
     r.sim.set_boxes(np.zeros((0, 5)))
     r.until(lambda: r.v().last_node.node_id == "r3c4", 10, "the turn and the edge")
+
+
+def test_state_factsheet_requests_and_init_position(tmp_path: Path) -> None:
+    r = make(tmp_path)
+    r.step(3)
+    n_state = len(r.states())
+    n_fact = sum(t == "factsheet" for t, _ in r.sent["agv1"])
+    r.v().receive(
+        "instantActions",
+        instant(
+            ("s", "stateRequest"),
+            ("f", "factsheetRequest"),
+            ("bad", "initPosition"),
+            ("good", "initPosition"),
+            params={
+                "bad": {"x": 2.0, "y": 2.0, "theta": 0.0, "mapId": "map", "lastNodeId": "r2c6"},
+                "good": {"x": -3.0, "y": 0.05, "theta": 0.0, "mapId": "map", "lastNodeId": "X"},
+            },
+        ),
+    )
+    r.step()  # handled within the step it arrives in
+    assert len(r.states()) == n_state + 1
+    assert sum(t == "factsheet" for t, _ in r.sent["agv1"]) == n_fact + 1
+    s = r.states()[-1]
+    assert statuses(s) == {"s": "FINISHED", "f": "FINISHED", "bad": "FAILED", "good": "FINISHED"}
+    assert s["lastNodeId"] == "X" and s["errors"][-1]["errorType"] == "actionError"
