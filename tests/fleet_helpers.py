@@ -242,3 +242,22 @@ def room_scenario(
     path = tmp / "fleet.yaml"
     path.write_text("\n".join(lines) + "\n" + extra)
     return path
+
+
+def charger_room(tmp: Path, charger: str = "r4c3") -> str:
+    """Write ``room.lif.json`` (the ROOM's derived layout, ``charger`` offering
+    startCharging to differential vehicles) into ``tmp``; returns the scenario's layout
+    block."""
+    import dataclasses
+
+    from agvsim.world.lif import NodeProps, layout_from_grid, save_lif
+    from agvsim.world.loaders import parse_text_picture
+
+    lay = layout_from_grid(parse_text_picture(ROOM, 1.0, None), ["agvsim.differential"], "room")
+    offer = ({"actionType": "startCharging", "blockingType": "HARD"},)
+    nodes = dict(lay.nodes)
+    nodes[charger] = dataclasses.replace(
+        lay.nodes[charger], types={"agvsim.differential": NodeProps(None, offer)}
+    )
+    save_lif(tmp / "room.lif.json", [dataclasses.replace(lay, nodes=nodes)])
+    return "{file: room.lif.json}"

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_fleet_vehicle import ROW4, make, statuses
 
-from agvsim.fleet.messages import kinematic_kind
+from agvsim.fleet.messages import kinematic_kind, top_speed_m_s
 from agvsim.fleet.schemas import VERSIONS, problems, reference_problems, schema
 from agvsim.kinematics import MODELS
 
@@ -50,6 +50,10 @@ def test_factsheet_of_every_model_validates(tmp_path: Path, model: str, version:
     assert spec.get("agvKinematic", spec.get("mobileRobotKinematic")) == kind
     phys = f["physicalParameters"]
     assert phys.get("length") == 0.5 and phys.get("width") == 0.4
+    top = top_speed_m_s(r.v().spec.model)
+    assert phys.get("speedMax", phys.get("maximumSpeed")) == min(1.0, top)
+    if model == "differential":  # r = 0.1 m, 20 rad/s at most: 2 m/s
+        assert top == pytest.approx(2.0)
 
 
 def test_v3_vehicle_runs_an_order_with_valid_messages(tmp_path: Path) -> None:

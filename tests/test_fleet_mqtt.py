@@ -15,8 +15,17 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
-from fleet_helpers import Master, Mosquitto, action, instant, order, room_scenario
+from fleet_helpers import (
+    Master,
+    Mosquitto,
+    action,
+    charger_room,
+    instant,
+    order,
+    room_scenario,
+)
 
 from agvsim.fleet.broker import EmbeddedBroker
 from agvsim.fleet.run import FleetRun
@@ -212,3 +221,78 @@ def order_for_room() -> dict:
 
     lay = layout_from_grid(parse_text_picture(ROOM, 1.0, None), ["agvsim.differential"])
     return order(lay, ["r4c1", "r4c2"])
+
+
+def test_update_pause_loads_charging_and_safety_over_mqtt(tmp_path: Path, broker: str) -> None:
+    layout = charger_room(tmp_path, "r4c6")
+    run = FleetRun(
+        load_scenario(room_scenario(tmp_path, [("agv1", "differential", "r4c1", 0.0)], layout)),
+        broker,
+    )
+    assert run.connect() == 1
+    m = Master(*host_port(broker))
+    v = run.fleet.vehicle("agv1")
+
+    def state() -> dict:
+        return m.last("agv1", "state") or {}
+
+    try:
+        pump(run, lambda: state(), 10, "a first state")
+        lay = run.fleet.layout
+        # base r4c1..r4c2 with a pick, horizon to r4c4; the update releases it, adds a drop
+        acts = {"r4c2": [action("pk", "pick", "HARD", loadId="L1")]}
+        m.send(
+            "agv1",
+            "order",
+            order(lay, ["r4c1", "r4c2", "r4c3", "r4c4"], released=2, node_actions=acts),
+        )
+        pump(run, lambda: state().get("loads"), 30, "the pick")
+        pump(run, lambda: state().get("newBaseRequest"), 10, "a base request")
+        assert state()["lastNodeId"] == "r4c2" and not state()["driving"]
+        m.send(
+            "agv1",
+            "order",
+            order(
+                lay,
+                ["r4c2", "r4c3", "r4c4"],
+                update=1,
+                seq0=2,
+                node_actions={"r4c4": [action("dp", "drop", "HARD")]},
+            ),
+        )
+        pump(run, lambda: state().get("driving"), 10, "driving on")
+        # pause mid edge, resume
+        m.send("agv1", "instantActions", instant(("p1", "startPause")))
+        pump(run, lambda: state().get("paused"), 10, "paused")
+        here = run.fleet.sim.state.poses[0].copy()
+        for _ in range(20):
+            run.step()
+        assert (run.fleet.sim.state.poses[0] == here).all()
+        m.send("agv1", "instantActions", instant(("p2", "stopPause")))
+        pump(
+            run,
+            lambda: state().get("lastNodeId") == "r4c4" and not state()["loads"],
+            30,
+            "the drop at r4c4",
+        )
+        # a box on the way on to the charger stops it; removed, it goes on and charges
+        run.fleet.sim.set_boxes(np.array([[1.5, 0.0, 0.0, 0.15, 0.15]]))
+        m.send(
+            "agv1",
+            "order",
+            order(
+                lay,
+                ["r4c4", "r4c5", "r4c6"],
+                order_id="o2",
+                node_actions={"r4c6": [action("c", "startCharging")]},
+            ),
+        )
+        pump(run, lambda: state().get("safetyState", {}).get("fieldViolation"), 20, "the stop")
+        assert state()["lastNodeId"] in ("r4c4", "r4c5") and not state()["driving"]
+        run.fleet.sim.set_boxes(np.zeros((0, 5)))
+        pump(run, lambda: state().get("batteryState", {}).get("charging"), 30, "charging")
+        assert v.errors == [] and run.fleet.sim.state.collisions.sum() == 0
+        all_valid(m)
+    finally:
+        run.close()
+        m.close()

@@ -375,3 +375,71 @@ def test_same_seed_same_messages(tmp_path: Path) -> None:
         r.step(200)
         out.append(r.sent["agv1"])
     assert out[0] == out[1]
+
+
+def test_an_empty_battery_stops_the_vehicle_until_charged(tmp_path: Path) -> None:
+    grid = parse_text_picture(ROOM, 1.0, None)
+    lay = layout_from_grid(grid, ["agvsim.differential"], "room")
+    offer = ({"actionType": "startCharging", "blockingType": "HARD"},)
+    nodes = dict(lay.nodes)
+    nodes["r4c2"] = dataclasses.replace(
+        lay.nodes["r4c2"], types={"agvsim.differential": NodeProps(None, offer)}
+    )
+    save_lif(tmp_path / "room.lif.json", [dataclasses.replace(lay, nodes=nodes)])
+    r = make(tmp_path, layout="{file: room.lif.json}")
+    b = r.v().battery
+    b.charge_pct = 0.06  # about a metre left
+    r.v().receive("order", order(r.fleet.layout, ROW4))
+    r.until(lambda: b.empty, 10, "an empty battery")
+    r.step(20)
+    s = r.last_state()
+    assert s["errors"][-1]["errorType"] == "batteryEmpty" and not s["driving"]
+    assert s["lastNodeId"] == "r4c2"  # it got one edge far (1 m at 0.05 %/m)
+    here = r.pose()
+    r.step(20)
+    assert np.allclose(r.pose(), here)
+    r.v().receive("instantActions", instant(("ch", "startCharging")))
+    r.until(lambda: b.charge_pct > 1.0, 10, "charge")
+    r.v().receive("instantActions", instant(("st", "stopCharging")))
+    r.until(lambda: r.v().last_node.node_id == "r4c5", 20, "the rest of the order")
+    assert r.last_state()["errors"] == []
+
+
+def test_turning_on_the_spot_keeps_its_circle_clear(tmp_path: Path) -> None:
+    r = make(tmp_path, [("agv1", "differential", "r4c4", 0.0)])
+    # a post 0.34 m from the centre, inside the 0.37 m circle the body sweeps (+5 cm)
+    r.sim.set_boxes(np.array([[0.34, -0.22, 0.0, 0.05, 0.05]]))
+    r.step(3)  # a scan with the post in it
+    r.v().receive("order", order(r.fleet.layout, ["r4c4", "r3c4"]))  # north: turn first
+    r.step(20)
+    s = r.last_state()
+    assert s["safetyState"]["fieldViolation"] and not s["driving"]
+    assert abs(r.pose()[2]) < 1e-9 and r.sim.state.collisions.sum() == 0
+    r.sim.set_boxes(np.zeros((0, 5)))
+    r.until(lambda: r.v().last_node.node_id == "r3c4", 10, "the turn and the edge")
+
+
+def test_state_factsheet_requests_and_init_position(tmp_path: Path) -> None:
+    r = make(tmp_path)
+    r.step(3)
+    n_state = len(r.states())
+    n_fact = sum(t == "factsheet" for t, _ in r.sent["agv1"])
+    r.v().receive(
+        "instantActions",
+        instant(
+            ("s", "stateRequest"),
+            ("f", "factsheetRequest"),
+            ("bad", "initPosition"),
+            ("good", "initPosition"),
+            params={
+                "bad": {"x": 2.0, "y": 2.0, "theta": 0.0, "mapId": "map", "lastNodeId": "r2c6"},
+                "good": {"x": -3.0, "y": 0.05, "theta": 0.0, "mapId": "map", "lastNodeId": "X"},
+            },
+        ),
+    )
+    r.step()  # handled within the step it arrives in
+    assert len(r.states()) == n_state + 1
+    assert sum(t == "factsheet" for t, _ in r.sent["agv1"]) == n_fact + 1
+    s = r.states()[-1]
+    assert statuses(s) == {"s": "FINISHED", "f": "FINISHED", "bad": "FAILED", "good": "FINISHED"}
+    assert s["lastNodeId"] == "X" and s["errors"][-1]["errorType"] == "actionError"

@@ -46,7 +46,7 @@ ACTION_TYPES: dict[str, ActionType] = {
 }
 
 
-def supported_scopes(durations: dict[str, float] | None = None) -> dict[str, frozenset[str]]:
+def supported_scopes() -> dict[str, frozenset[str]]:
     """action type -> scopes, for ``parse_order``."""
     return {name: t.scopes for name, t in ACTION_TYPES.items()}
 

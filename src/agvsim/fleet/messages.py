@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,6 +20,9 @@ from agvsim.fleet.actions import ACTION_TYPES
 from agvsim.fleet.dialect import Dialect
 from agvsim.fleet.order import Limits
 from agvsim.sim.spec import RobotSpec
+
+if TYPE_CHECKING:
+    from agvsim.fleet.vehicle import Vehicle
 
 TOPICS_OUT = ("state", "visualization", "connection", "factsheet")
 
@@ -80,6 +83,48 @@ def action_state(a: Any, v3: bool, paused_ok: bool) -> dict:
     return out
 
 
+def state(v: Vehicle) -> dict:
+    """The vehicle's ``state`` message (VDA 5050 6.10, in its dialect's field names)."""
+    v3 = v.v3
+    ok = v.dialect.has_paused_status
+    order_states = [action_state(a, v3, ok) for a in v.order_actions.values()]
+    instant_states = [action_state(a, v3, ok) for a in v.instant_actions]
+    released_left = sum(n.released for n in v.route_nodes)
+    last = v.last_node
+    out: dict[str, Any] = v.stamp.header("state", v.t_s) | {
+        "orderId": v.order_id,
+        "orderUpdateId": v.update_id,
+        "lastNodeId": "" if last is None else last.node_id,
+        "lastNodeSequenceId": 0 if last is None else last.seq,
+        "nodeStates": [n.state_json() for n in v.route_nodes],
+        "edgeStates": [e.state_json() for e in v.route_edges],
+        "driving": v.driving,
+        "paused": v.paused,
+        "newBaseRequest": released_left <= 1 and len(v.route_nodes) > released_left,
+        "distanceSinceLastNode": round(v.distance_since_node_m, 4),
+        "operatingMode": "AUTOMATIC",
+        "loads": list(v.loads),
+        "errors": [e for _, e in v.errors],
+        "information": [],
+        "velocity": velocity_json(v.twist),
+    }
+    pos = position_json(v.pose, v.cfg.map_id, v3)
+    if v3:
+        return out | {
+            "actionStates": order_states,
+            "instantActionStates": instant_states,
+            "powerSupply": v.battery.state_json(True),
+            "safetyState": {"activeEmergencyStop": "NONE", "fieldViolation": v.field_violation},
+            "mobileRobotPosition": pos,
+        }
+    return out | {
+        "actionStates": order_states + instant_states,
+        "batteryState": v.battery.state_json(False),
+        "safetyState": {"eStop": "NONE", "fieldViolation": v.field_violation},
+        "agvPosition": pos,
+    }
+
+
 def visualization(
     stamp: Stamper, t_s: float, pose: np.ndarray, twist: tuple, map_id: str, state_header_id: int
 ) -> dict:
@@ -95,6 +140,13 @@ def visualization(
 
 
 # ------------------------------------------------------------------------------ factsheet
+def top_speed_m_s(model: Any) -> float:
+    """The fastest straight-ahead speed the model's wheel speed limit allows (m/s)."""
+    wheels = np.abs(np.asarray(model.inverse(np.array([[1.0, 0.0, 0.0]])).speeds)).max()
+    limit = float(np.min(np.asarray(model.max_wheel_speed_rad_s)))
+    return limit / float(wheels) if wheels > 0 else float("inf")
+
+
 def kinematic_kind(model: Any) -> str:
     """VDA 5050's agvKinematic: DIFF, OMNI or THREEWHEEL. Ackermann (no such value in the
     spec) is reported as THREEWHEEL, the nearest: a steered front axle on a bicycle model."""

@@ -3,11 +3,14 @@ served from the simulation's own thread.
 
 There is no network thread per client: ``poll(timeout_s)`` waits on every socket at once
 (``selectors``) and lets paho read, write and keep alive; ``flush()`` publishes what the
-vehicles queued. A thousand vehicles are a thousand sockets and no thread. Each client sets
-its last will (``connection`` = CONNECTIONBROKEN, QoS 1, retained) before connecting, then
-publishes ONLINE, its factsheet (retained) and a state, and subscribes to its ``order`` and
-``instantActions``. A lost connection is retried every ``retry_s``; on reconnecting the
-vehicle republishes all of it.
+vehicles queued. A thousand vehicles are a thousand sockets and no thread. Each vehicle's
+client sets its last will (``connection`` = CONNECTIONBROKEN, QoS 1, retained) before
+connecting, then publishes ONLINE, its factsheet (retained) and a state. One more client, the
+fleet's receiver, subscribes to ``.../+/order`` and ``.../+/instantActions`` and hands each
+message to its vehicle: two subscriptions in the broker instead of two per vehicle (a broker
+that matches every message against every subscription, as amqtt does, would otherwise slow
+down with the square of the fleet). A lost connection is retried every ``retry_s``; on
+reconnecting a vehicle republishes all of it.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import json
 import resource
 import selectors
+import socket
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -53,18 +57,41 @@ def raise_file_limit(n: int) -> None:
         resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
 
 
-class _Link:
-    """One vehicle's connection."""
+def _read_all(c: mqtt.Client, most: int = 1000) -> None:
+    """Read every packet waiting on the socket (paho's loop_read takes one QoS 0 message a
+    call; the fleet receiver gets the orders of every vehicle on one socket)."""
+    for _ in range(most):
+        c.loop_read()
+        sock = c.socket()
+        if not isinstance(sock, socket.socket):
+            return
+        try:
+            if not sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT):
+                return  # closed: paho notices at its next read
+        except OSError:  # BlockingIOError: nothing more to read
+            return
 
-    def __init__(self, transport: MqttTransport, vehicle: Vehicle, prefix: str):
-        self.t, self.vehicle, self.prefix = transport, vehicle, prefix
+
+class _Link:
+    """One connection: a vehicle's (publishes, holds the last will) or the fleet receiver's
+    (``vehicle`` None; subscribes to ``topics``)."""
+
+    def __init__(
+        self,
+        transport: MqttTransport,
+        vehicle: Vehicle | None,
+        prefix: str,
+        topics: Sequence[str] = (),
+    ):
+        self.t, self.vehicle, self.prefix, self.topics = transport, vehicle, prefix, list(topics)
         self.online = False
         self.next_try_s = 0.0
         c = mqtt.Client(
             mqtt.CallbackAPIVersion.VERSION2, client_id=prefix.replace("/", "_"), clean_session=True
         )
-        will = vehicle.connection(vehicle.dialect.broken)
-        c.will_set(f"{prefix}/connection", json.dumps(will), qos=1, retain=True)
+        if vehicle is not None:
+            will = vehicle.connection(vehicle.dialect.broken)
+            c.will_set(f"{prefix}/connection", json.dumps(will), qos=1, retain=True)
         c.on_connect = self._on_connect
         c.on_disconnect = self._on_disconnect
         c.on_message = self._on_message
@@ -85,16 +112,18 @@ class _Link:
         if reason.is_failure:
             return
         self.online = True
-        client.subscribe([(f"{self.prefix}/order", 0), (f"{self.prefix}/instantActions", 0)])
-        self.vehicle.publish_all()
-        self.t._flush_one(self)
+        if self.topics:
+            client.subscribe([(t, 0) for t in self.topics])
+        if self.vehicle is not None:
+            self.vehicle.publish_all()
+            self.t._flush_one(self)
 
     def _on_disconnect(self, _c, _u, _flags, _reason, _props) -> None:
         self.online = False
         self.next_try_s = time.monotonic() + self.t.retry_s
 
     def _on_message(self, _c, _u, msg) -> None:
-        self.vehicle.receive(msg.topic.rsplit("/", 1)[-1], msg.payload)
+        self.t._route(msg.topic, msg.payload)
 
     def publish(self, topic: str, message: dict, retain: bool) -> None:
         self.client.publish(
@@ -116,14 +145,17 @@ class MqttTransport:
         self.address, self.retry_s = address, retry_s
         raise_file_limit(len(vehicles))
         self.sel = selectors.DefaultSelector()
-        self.links = [
-            _Link(
-                self,
-                v,
-                f"{interface_name}/{v.cfg.dialect.major}/{v.cfg.manufacturer}/{v.cfg.serial}",
-            )
+        prefixes = {
+            v.cfg.serial: f"{interface_name}/{v.cfg.dialect.major}/{v.cfg.manufacturer}/"
+            f"{v.cfg.serial}"
             for v in vehicles
-        ]
+        }
+        self.links = [_Link(self, v, prefixes[v.cfg.serial]) for v in vehicles]
+        self._by_prefix = {link.prefix: link.vehicle for link in self.links}
+        groups = sorted({p.rsplit("/", 1)[0] for p in prefixes.values()})
+        topics = [f"{g}/+/{t}" for g in groups for t in ("order", "instantActions")]
+        self.receiver = _Link(self, None, f"{interface_name}/agvsim-fleet-{id(self):x}", topics)
+        self._all = [self.receiver, *self.links]
         self._last_misc = 0.0
         self._pending: set[_Link] = set()  # links with output queued since the last write
         self._writable: set[_Link] = set()  # links registered for EVENT_WRITE
@@ -165,16 +197,22 @@ class MqttTransport:
                 except (KeyError, ValueError):
                     pass
 
+    def _route(self, topic: str, payload: bytes) -> None:
+        prefix, name = topic.rsplit("/", 1)
+        vehicle = self._by_prefix.get(prefix)
+        if vehicle is not None:
+            vehicle.receive(name, payload)
+
     def connect(self, timeout_s: float = 10.0) -> int:
         """Connect every vehicle; returns how many are online after ``timeout_s`` at most."""
-        for link in self.links:
+        for link in self._all:
             link.connect()
         t0 = time.monotonic()
-        while time.monotonic() - t0 < timeout_s and not all(x.online for x in self.links):
-            if not any(x.client.socket() is not None for x in self.links):
+        while time.monotonic() - t0 < timeout_s and not all(x.online for x in self._all):
+            if not any(x.client.socket() is not None for x in self._all):
                 break  # every connection was refused
             self.poll(0.05)
-        return sum(x.online for x in self.links)
+        return sum(x.online for x in self.links) if self.receiver.online else 0
 
     def poll(self, timeout_s: float = 0.0) -> None:
         """Serve the sockets for up to ``timeout_s`` (read, write, keepalive, reconnect)."""
@@ -182,18 +220,19 @@ class MqttTransport:
         for key, events in self.sel.select(timeout=max(0.0, timeout_s)):
             c = key.data.client
             if events & selectors.EVENT_READ:
-                c.loop_read()
+                _read_all(c)
             if events & selectors.EVENT_WRITE:
                 c.loop_write()
         now = time.monotonic()
         if now - self._last_misc >= 1.0:
             self._last_misc = now
-            for link in self.links:
+            for link in self._all:
                 link.client.loop_misc()
                 if not link.online and now >= link.next_try_s and link.client.socket() is None:
                     link.connect()
 
     def _flush_one(self, link: _Link) -> None:
+        assert link.vehicle is not None
         for topic, msg, retain in link.vehicle.drain():
             link.publish(topic, msg, retain)
 
@@ -203,21 +242,23 @@ class MqttTransport:
         for link in self.links:
             if link.online:
                 self._flush_one(link)
-            else:
+            elif link.vehicle is not None:
                 link.vehicle.drain()
         self._write_pending()
 
     def close(self) -> None:
         """Publish OFFLINE and disconnect cleanly (no last will)."""
         for link in self.links:
-            if link.online:
+            if link.online and link.vehicle is not None:
                 link.publish("connection", link.vehicle.connection("OFFLINE"), True)
+        for link in self._all:
+            if link.online:
                 link.client.disconnect()
         t0 = time.monotonic()
         while time.monotonic() - t0 < 2.0 and any(
-            x.client.want_write() for x in self.links if x.client.socket() is not None
+            x.client.want_write() for x in self._all if x.client.socket() is not None
         ):
             self.poll(0.05)
-        for link in self.links:
+        for link in self._all:
             link.client.loop_misc()
         self.sel.close()

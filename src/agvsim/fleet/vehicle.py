@@ -15,7 +15,6 @@ and, for models that can turn there, allowedDeviationTheta.
 
 from __future__ import annotations
 
-import json
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -29,9 +28,9 @@ from agvsim.fleet import messages, safety
 from agvsim.fleet.actions import ACTION_TYPES, ENDED, drive_blocked, schedule, supported_scopes
 from agvsim.fleet.battery import Battery
 from agvsim.fleet.dialect import V2, Dialect, Problem
+from agvsim.fleet.intake import decode
 from agvsim.fleet.motion import Leg
 from agvsim.fleet.order import Action, Limits, OrderEdge, OrderNode, OrderRefused, parse_order
-from agvsim.fleet.schemas import problems as schema_problems
 from agvsim.sim.spec import RobotSpec
 from agvsim.world.lif import Layout
 
@@ -95,6 +94,8 @@ class Vehicle:
         if epoch is not None:
             self.stamp.epoch = epoch
         self.supported = supported_scopes()
+        # as fast as the configuration allows and the wheels can turn (factsheet speedMax)
+        self.max_speed_m_s = min(cfg.max_speed_m_s, messages.top_speed_m_s(spec.model))
         self.battery = battery or Battery()
         hl, hw = spec.footprint_half_m
         self._front_m = spec.body_offset_x_m + hl
@@ -176,7 +177,7 @@ class Vehicle:
             self.t_s,
             self.spec,
             c.vehicle_type,
-            c.max_speed_m_s,
+            self.max_speed_m_s,
             c.limits,
             c.state_period_s,
             c.vis_period_s,
@@ -184,48 +185,7 @@ class Vehicle:
         )
 
     def state(self) -> dict:
-        v3 = self.v3
-        ok = self.dialect.has_paused_status
-        order_states = [messages.action_state(a, v3, ok) for a in self.order_actions.values()]
-        instant_states = [messages.action_state(a, v3, ok) for a in self.instant_actions]
-        released_left = sum(n.released for n in self.route_nodes)
-        out: dict[str, Any] = self.stamp.header("state", self.t_s) | {
-            "orderId": self.order_id,
-            "orderUpdateId": self.update_id,
-            "lastNodeId": "" if self.last_node is None else self.last_node.node_id,
-            "lastNodeSequenceId": 0 if self.last_node is None else self.last_node.seq,
-            "nodeStates": [n.state_json() for n in self.route_nodes],
-            "edgeStates": [e.state_json() for e in self.route_edges],
-            "driving": self.driving,
-            "paused": self.paused,
-            "newBaseRequest": released_left <= 1 and len(self.route_nodes) > released_left,
-            "distanceSinceLastNode": round(self.distance_since_node_m, 4),
-            "operatingMode": "AUTOMATIC",
-            "loads": list(self.loads),
-            "errors": [e for _, e in self.errors],
-            "information": [],
-            "velocity": messages.velocity_json(self.twist),
-        }
-        pos = messages.position_json(self.pose, self.cfg.map_id, v3)
-        if v3:
-            out |= {
-                "actionStates": order_states,
-                "instantActionStates": instant_states,
-                "powerSupply": self.battery.state_json(True),
-                "safetyState": {
-                    "activeEmergencyStop": "NONE",
-                    "fieldViolation": self.field_violation,
-                },
-                "mobileRobotPosition": pos,
-            }
-        else:
-            out |= {
-                "actionStates": order_states + instant_states,
-                "batteryState": self.battery.state_json(False),
-                "safetyState": {"eStop": "NONE", "fieldViolation": self.field_violation},
-                "agvPosition": pos,
-            }
-        return out
+        return messages.state(self)
 
     def visualization(self) -> dict:
         sid = self.stamp.counters.get("state", 0)
@@ -269,58 +229,19 @@ class Vehicle:
     # ------------------------------------------------------------------ incoming
     def _decode(self, payload: Any, topic: str) -> dict | None:
         """The message as a dict, or None with a validation error recorded."""
-        refs: dict[str, str] = {"topic": topic}
-        scope = "order" if topic == "order" else "instant"
-        msg = payload
-        if isinstance(payload, bytes | bytearray | str):
-            size = len(payload)
-            if size > self.cfg.limits.max_message_bytes:
-                self._error(
-                    scope,
-                    Problem.VALIDATION,
-                    f"message of {size} bytes; this vehicle "
-                    f"takes at most {self.cfg.limits.max_message_bytes}",
-                    refs,
-                )
-                return None
-            try:
-                msg = json.loads(payload)
-            except (json.JSONDecodeError, UnicodeDecodeError) as err:
-                self._error(scope, Problem.VALIDATION, f"not valid JSON: {err}", refs)
-                return None
-        if not isinstance(msg, dict):
-            self._error(scope, Problem.VALIDATION, "the message is not a JSON object", refs)
-            return None
-        for key in ("headerId", "orderId", "orderUpdateId"):
-            if isinstance(msg.get(key), str | int) and not isinstance(msg.get(key), bool):
-                refs[key] = str(msg[key])
-        found = schema_problems(self.dialect.version, topic, msg, limit=3)
-        if found:
-            self._error(
-                scope,
-                Problem.VALIDATION,
-                f"does not match the VDA 5050 {self.dialect.version} {topic} schema: "
-                + "; ".join(found),
-                refs,
+        c = self.cfg
+        try:
+            return decode(
+                payload,
+                topic,
+                self.dialect.version,
+                c.limits.max_message_bytes,
+                c.manufacturer,
+                c.serial,
             )
+        except OrderRefused as r:
+            self._error("order" if topic == "order" else "instant", r.kind, r.description, r.refs)
             return None
-        if str(msg["version"]).split(".")[0] != self.dialect.version.split(".")[0]:
-            self._error(
-                scope,
-                Problem.VALIDATION,
-                f"version {msg['version']!r}: this vehicle speaks VDA 5050 {self.dialect.version}",
-                refs,
-            )
-            return None
-        if (msg["manufacturer"], msg["serialNumber"]) != (self.cfg.manufacturer, self.cfg.serial):
-            self._error(
-                scope,
-                Problem.VALIDATION,
-                f"addressed to {msg['manufacturer']}/{msg['serialNumber']}, not to this vehicle",
-                refs,
-            )
-            return None
-        return msg
 
     def _on_order(self, payload: Any) -> None:
         msg = self._decode(payload, "order")
@@ -578,7 +499,7 @@ class Vehicle:
         self._dirty = True
 
     def _speeds(self, edges: list[OrderEdge]) -> list[float]:
-        v = self.cfg.max_speed_m_s
+        v = self.max_speed_m_s
         return [v if e.max_speed_m_s is None else min(v, e.max_speed_m_s) for e in edges]
 
     def _leg_targets(self) -> tuple[list[OrderNode], list[OrderEdge]]:
@@ -603,6 +524,8 @@ class Vehicle:
             if not any(e[0] == "run" for e in self.errors):
                 self._error("run", Problem.BATTERY_EMPTY, "the battery is empty", {})
             return stop
+        if any(e[0] == "run" for e in self.errors):
+            self._clear_errors("run")  # charged again
         if not self.route_edges or not self.route_edges[0].released or self.last_node is None:
             return stop
         edge = self.route_edges[0]
@@ -655,7 +578,8 @@ class Vehicle:
         if len(pts) == 0:
             return False
         path = self.leg.ahead(length)
-        if len(path) < 2:  # turning on the spot at a node: the body's own circle
+        if math.hypot(tw[0], tw[1]) < 1e-6 or len(path) < 2:
+            # turning on the spot: the circle the body sweeps (around the reference point)
             r = self.spec.bounding_radius_m + self.cfg.field_side_margin_m
             return bool((np.hypot(*(pts - self.pose[:2]).T) < r).any())
         return safety.violated(pts[:, :2], path[1:], self._half_width_m)
