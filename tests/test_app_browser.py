@@ -15,6 +15,8 @@ from agvsim.bench_app import FLAGS, free_port
 
 from helpers import CHROMIUM, need_browser, wait_for
 
+pytestmark = pytest.mark.slow  # a real browser
+
 ROOM = """\
 name: room
 world:

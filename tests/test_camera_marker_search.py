@@ -31,6 +31,7 @@ def stop_pose(sim, name: str, distance_m: float) -> tuple[np.ndarray, float]:
     return cam - np.array([c * mx - s * my, s * mx + c * my]), heading
 
 
+@pytest.mark.slow
 def test_finds_marker_3_and_stops_in_front_of_it():
     sim = build(load_scenario(SCENARIO))
     ctrl = sim.bindings[0].controller

@@ -116,6 +116,7 @@ def test_local_processes_give_the_same_table(clean, tmp_path):
     assert without_wall(pool.table).equals(without_wall(clean.table))
 
 
+@pytest.mark.slow
 def test_ray_gives_the_same_table(clean, tmp_path):
     pytest.importorskip("ray")
     on_ray = run_sweep(

@@ -206,6 +206,7 @@ def test_look_alike_closures_do_not_confirm_each_other() -> None:
     assert det.verify(closure(30 + cfg.confirm_gap, *later, submap=1)) == []
 
 
+@pytest.mark.slow
 def test_intel_slice_runs_and_improves_on_odometry(tmp_path: Path) -> None:
     root = datasets_dir()
     if root is None or not (root / "intel" / "intel.clf.gz").is_file():
