@@ -215,9 +215,28 @@ def test_the_onboard_camera_is_a_view_of_a_robot_with_a_camera(app, page):
     page.screenshot(path=str(_shots() / "onboard_view.png"))
     # the other robot has no camera: picking it takes the option away
     page.get_by_role("tab", name="Robot").click()
-    page.get_by_label("robot").first.click()
+    page.get_by_label("robot", exact=True).first.click()
     page.get_by_role("option", name="other", exact=True).click()
     wait_for(lambda: app.panel.view_of[cid] == "chase", what="back to chase")
+
+
+def test_a_click_in_the_top_view_places_the_picked_robot(app, page):
+    s = app.session
+    page.get_by_role("tab", name="Robot").click()
+    page.get_by_label("robot", exact=True).first.click()
+    page.get_by_role("option", name="agv", exact=True).click()
+    page.get_by_role("tab", name="Run").click()
+    page.get_by_label("view").first.click()
+    page.get_by_role("option", name="top plan", exact=True).click()
+    page.wait_for_timeout(1500)
+    page.get_by_role("tab", name="World").click()
+    page.get_by_label("place robots").check()
+    box = page.locator("canvas").first.bounding_box()
+    # the top view looks straight down on the map's centre, (0, 0)
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    wait_for(lambda: np.hypot(*s.sim.state.poses[0, :2]) < 0.3, 60.0, "agv at the click")
+    page.get_by_text("agv placed at").first.wait_for(timeout=60000)
+    page.get_by_label("place robots").uncheck()
 
 
 def test_the_console_stays_quiet(app, page):

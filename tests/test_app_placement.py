@@ -77,3 +77,13 @@ def test_a_wall_on_the_initial_pose_also_counts():
     # the west wall face is x = -3.5: the tail (0.3) plus the clearance must fit
     assert x - 0.3 - CLEARANCE_M >= -3.5 - 1e-9
     assert x == pytest.approx(-3.1, abs=0.06)
+
+
+def test_placing_a_robot_by_a_click_takes_the_nearest_free_spot():
+    s = _session()
+    note = s.move_robot("agv", 1.0, -1.0)  # free floor
+    assert tuple(s.sim.state.poses[0]) == (1.0, -1.0, 0.0) and "placed at (1.00, -1.00)" in note
+    note = s.move_robot("agv", 2.0, 0.0)  # on 'parked': beside it instead
+    x, y, _ = s.sim.state.poses[0]
+    assert blocker(s.sim, 0, (x, y, 0.0)) is None and 0.0 < math.hypot(x - 2.0, y) < 1.0
+    assert s.robot_config("agv")["pose"]["x_m"] == -2.0  # the initial pose stays

@@ -445,6 +445,12 @@ class Panel:
             initial_value=False,
             hint="click a floor cell to add a wall, a wall to remove it",
         )
+        self.place = gui.add_checkbox(
+            "place robots",
+            initial_value=False,
+            hint="click the floor (best in the top plan view) to move the robot picked in the "
+            "Robot tab there, at the nearest free spot",
+        )
         self.world_msg = gui.add_markdown("")
         self.maze_rows = gui.add_number(
             "rooms north-south", initial_value=5, min=1, max=200, step=1
@@ -473,11 +479,22 @@ class Panel:
 
         @self.server.scene.on_click()
         def _(event: Any) -> None:
-            if self.edit.value:
+            if self.place.value:
+                self._world_do(lambda: self._place_robot(event.ray_origin, event.ray_direction))
+            elif self.edit.value:
                 self._world_do(lambda: self._click_cell(event.ray_origin, event.ray_direction))
 
     def _world_do(self, fn: Any) -> None:
         self._do(fn, self.world_msg)
+
+    def _place_robot(self, origin: Any, direction: Any) -> None:
+        o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
+        if d[2] >= -1e-9:
+            self.world_msg.content = _error_md("that click is not on the floor")
+            return
+        t = -o[2] / d[2]
+        note = self.session.move_robot(self.selected, o[0] + t * d[0], o[1] + t * d[1])
+        self.world_msg.content = note
 
     def _click_cell(self, origin: Any, direction: Any) -> None:
         cell = pick_cell(self.session, np.asarray(origin), np.asarray(direction))

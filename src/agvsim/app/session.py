@@ -492,6 +492,25 @@ class Session:
             else:
                 tele.set_twist(vx, vy, om)
 
+    def move_robot(self, name: str, x_m: float, y_m: float) -> str:
+        """Put robot ``name`` (heading kept) at the free pose nearest to (x, y) now, as the
+        app's "place robots" click does; its initial pose stays. Returns what was done."""
+        from agvsim.app.placement import MAX_SEARCH_M, nearest_free_pose
+
+        with self.lock:
+            i = self.sim.robot_index(name)
+            th = float(self.sim.state.poses[i, 2])
+            spot = nearest_free_pose(self.sim, i, (float(x_m), float(y_m), th))
+            if spot is None:
+                raise EditError(f"no free place for {name} within {MAX_SEARCH_M:g} m of that point")
+            self.sim.state.poses[i] = spot
+            self.sim.state.odom_poses[i] = spot
+            self.sim._sense(force=True)
+            h = self.history.get(name)
+            if h is not None:
+                h.trail.clear()
+            return f"{name} placed at ({spot[0]:.2f}, {spot[1]:.2f})"
+
     # ------------------------------------------------------------------ the maze
     def cell_at(self, x_m: float, y_m: float) -> tuple[int, int] | None:
         with self.lock:
