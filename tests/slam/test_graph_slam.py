@@ -103,6 +103,7 @@ def run_slam(truth: np.ndarray, seed: int = 0) -> tuple[GraphSlam, np.ndarray, n
     return slam, odom, slam.trajectory()[1]
 
 
+@pytest.mark.slow
 def test_loop_closes_on_revisit_and_beats_odometry() -> None:
     truth = loop_path(1.4)
     slam, odom, est = run_slam(truth)

@@ -629,8 +629,11 @@ class Panel:
             f"state **{state}**, collisions: walls {coll[0]}, robots {coll[1]}\n\n"
             f"| wheel | rad/s |\n|---|---|\n{rows}"
         )
-        if hw is None or len(t) < 2:
+        if hw is None or ht is None:
             return
+        if len(t) < 2:  # a robot just rebuilt: its first sample, held for a moment
+            t = np.array([t[0] - 0.05, t[0]])
+            hw, ht = np.repeat(hw, 2, axis=0), np.repeat(ht, 2, axis=0)
         keep = t >= t[-1] - 10.0
         t, hw, ht = t[keep], hw[keep], ht[keep]
         # the plots are made once, with a series for each of up to four wheels, and never
@@ -648,12 +651,6 @@ class Panel:
             ),
         )
         key = (self.selected, tuple(wheels))
-        if self.plot_wheels is not None and self._plot_layout != key:
-            # another robot, or this one rebuilt: new plots (uPlot keeps stale scales when
-            # only the data and series change)
-            self.plot_wheels.remove()
-            self.plot_twist.remove()
-            self.plot_wheels = self.plot_twist = None
         if self.plot_wheels is None:
             gui = self.server.gui
             with self._run_tab:
@@ -678,6 +675,9 @@ class Panel:
                 )
             self._plot_layout = key
             return
+        if self._plot_layout != key:  # another robot, or this one rebuilt: its own history
+            self._plot_layout = key
+            self.plot_wheels.series = series
         self.plot_wheels.data = (t, *hw4.T)
         self.plot_twist.data = (t, *ht.T)
 
