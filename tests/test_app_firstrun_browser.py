@@ -178,6 +178,16 @@ def test_wheel_plot_after_apply_shows_the_present_time(app, page):
     page.get_by_role("tab", name="Run").click()
     page.wait_for_timeout(800)
     page.screenshot(path=str(_shots() / "plots_after_apply.png"), full_page=True)
+    # and the browser draws it: the right wheel's line (#1f77b4) is on the wheel-speed plot
+    import io
+
+    from PIL import Image
+
+    plot = page.locator(".uplot canvas").first  # the drawing, not the legend
+    plot.scroll_into_view_if_needed()
+    img = np.asarray(Image.open(io.BytesIO(plot.screenshot())).convert("RGB")).astype(int)
+    line = (np.abs(img - [31, 119, 180]).sum(axis=-1) < 60).sum()
+    assert line > 50, f"the wheel-speed plot is empty after Apply ({line} line pixels)"
 
 
 def test_each_tab_has_its_own_view(app, page, browser):

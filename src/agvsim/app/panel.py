@@ -677,7 +677,10 @@ class Panel:
             return
         if self._plot_layout != key:  # another robot, or this one rebuilt: its own history
             self._plot_layout = key
-            self.plot_wheels.series = series
+            if tuple(self.plot_wheels.series) != series:
+                # only when the wheels differ: the browser redraws an emptied plot when the
+                # series are sent again (the empty plot after Apply)
+                self.plot_wheels.series = series
         self.plot_wheels.data = (t, *hw4.T)
         self.plot_twist.data = (t, *ht.T)
 
