@@ -15,6 +15,8 @@ from agvsim.bench_app import FLAGS, free_port
 
 from helpers import CHROMIUM, need_browser, wait_for
 
+pytestmark = pytest.mark.slow  # a real browser
+
 ROOM = """\
 name: room
 world:
@@ -130,7 +132,7 @@ def test_play_moves_the_robot(app, page):
 def test_wheel_radius_in_the_panel_changes_the_motion(app, page):
     page.get_by_role("tab", name="Run").click()
     page.get_by_role("button", name="Reset").click()
-    apply_robot_field(page, "wheel_radius_m", "0.05")
+    apply_robot_field(page, "wheel radius (m)", "0.05")
     wait_for(
         lambda: app.session.robot_config("agv").get("params", {}).get("wheel_radius_m") == 0.05,
         what="the new wheel radius",

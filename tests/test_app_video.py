@@ -20,6 +20,8 @@ imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
 from agvsim.app.session import EditError, Session  # noqa: E402
 from agvsim.scenario import parse_scenario  # noqa: E402
 
+pytestmark = pytest.mark.slow  # video encoding
+
 ROOM = "\n".join(["#########"] + ["#.......#"] * 7 + ["#########"])  # 9 m x 9 m
 
 

@@ -20,6 +20,8 @@ from agvsim.control.avoid import side_beams_of
 from agvsim.scenario import build, cone_beams, parse_scenario
 from agvsim.sensors.range_sensor import RangeSensorSpec
 
+pytestmark = pytest.mark.slow  # endurance: 10-minute runs of every model
+
 ROOT = Path(__file__).resolve().parents[1]
 DURATION_S = 600.0  # 10 minutes: 30,000 steps of 20 ms
 MODELS = ("differential", "tricycle", "ackermann", "mecanum", "omni3")

@@ -10,6 +10,8 @@ import pytest
 
 from agvsim.scenario import load_scenario, parse_scenario
 
+pytestmark = pytest.mark.slow  # the app with cameras
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

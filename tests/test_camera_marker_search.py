@@ -31,6 +31,7 @@ def stop_pose(sim, name: str, distance_m: float) -> tuple[np.ndarray, float]:
     return cam - np.array([c * mx - s * my, s * mx + c * my]), heading
 
 
+@pytest.mark.slow
 def test_finds_marker_3_and_stops_in_front_of_it():
     sim = build(load_scenario(SCENARIO))
     ctrl = sim.bindings[0].controller
@@ -51,6 +52,13 @@ def test_finds_marker_3_and_stops_in_front_of_it():
     for _ in range(25):  # and it stays put
         sim.step()
     assert np.allclose(sim.state.poses[0], pose)
+    # summary.json says what the search came to
+    from agvsim.record.outputs import summary
+
+    report = summary(sim, 1.0)["robots"][0]["controller"]
+    assert report["marker_id"] == 3 and report["marker_found"] and report["stopped_in_front"]
+    assert 0.0 < report["found_at_s"] < sim.state.t_s
+    assert report["marker_xy_m"] == pytest.approx([5.0, -2.5], abs=0.1)
 
 
 def test_locate_turns_a_frame_into_the_stop_pose():

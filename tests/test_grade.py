@@ -53,6 +53,7 @@ def write_suite(folder: Path, tasks: list[dict], **extra) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_hanging_and_raising_tasks_score_zero_and_the_others_go_on(tmp_path):
     (tmp_path / "alice.py").write_text(STUDENT, encoding="utf-8")
     suite = write_suite(
@@ -94,6 +95,7 @@ def test_hanging_and_raising_tasks_score_zero_and_the_others_go_on(tmp_path):
     assert "driving runner" in log
 
 
+@pytest.mark.slow
 def test_a_file_that_cannot_load_scores_zero_everywhere(tmp_path):
     (tmp_path / "bob.py").write_text("def controller(obs):\n    return (0.1, 0, 0\n")
     (tmp_path / "carol.py").write_text("def step(obs):\n    return (0.1, 0, 0)\n")

@@ -120,7 +120,9 @@ def test_planned_path_keeps_clear_of_walls():
 
 
 # ------------------------------------------------------------------------------------ A* solver
-@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize(
+    "seed", [0, 1, *(pytest.param(s, marks=pytest.mark.slow) for s in range(2, 20))]
+)  # the fast tier: two mazes a model
 @pytest.mark.parametrize("model", ALL_MODELS)
 def test_astar_solver_reaches_goal_in_random_mazes(model, seed):
     """Corner room to opposite corner room of a 5 x 5 maze (2 m corridors, 16 m square), the
@@ -166,6 +168,7 @@ def lidar(beams: int = 72) -> RangeSensorSpec:
     return RangeSensorSpec.fan("lidar", beams, 2 * np.pi, 4.0, rate_hz=20.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(5))
 def test_tremaux_explorer_reaches_goal_without_a_map(seed, one_numba_thread):
     """Perfect 5 x 5 mazes, differential drive with a 72-beam 4 m lidar, right hand."""
@@ -181,6 +184,7 @@ def test_tremaux_explorer_reaches_goal_without_a_map(seed, one_numba_thread):
     assert sim.state.wall_collisions[0] == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2])
 def test_tremaux_explorer_leaves_islands_in_mazes_with_loops(seed, one_numba_thread):
     # with loops a wall follower can circle a free-standing wall for ever: the marks see the
@@ -258,6 +262,7 @@ def simulation_from_yaml(path: Path) -> tuple[Simulation, AStarMazeSolver]:
         return sim, ctrl
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["differential", "tricycle", "ackermann", "mecanum"])
 def test_thesis_maze_scenarios_reach_their_goal(model, one_numba_thread):
     path = SCENARIOS / f"maze_solve_{model}.yaml"

@@ -12,6 +12,8 @@ from agvsim.runner import run_scenario
 from agvsim.scenario import ScenarioError, parse_scenario
 from agvsim.world.grid import OccupancyGrid
 
+pytestmark = pytest.mark.slow  # SLAM during whole runs
+
 ROOM = [
     [1, 1, 1, 1, 1, 1],
     [1, 0, 0, 0, 0, 1],

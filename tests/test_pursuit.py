@@ -101,6 +101,7 @@ def runs() -> list[dict]:
 
 
 # ---------------------------------------------------------------------------- the thesis case
+@pytest.mark.slow
 def test_thesis_pursuit_ends_in_capture(runs):
     _, _, duration = thesis_case(0)
     times = [r["chase"]["time_to_capture_s"] for r in runs]
@@ -112,6 +113,7 @@ def test_thesis_pursuit_ends_in_capture(runs):
         assert r["chase"]["survival_time_s"] == r["chase"]["time_to_capture_s"]
 
 
+@pytest.mark.slow
 def test_evader_survives_longer_than_an_idle_target(runs):
     chase = np.array([r["chase"]["survival_time_s"] for r in runs])
     idle = np.array([r["idle"]["survival_time_s"] for r in runs])
@@ -121,12 +123,14 @@ def test_evader_survives_longer_than_an_idle_target(runs):
     assert np.median(chase / idle) > 1.3  # measured: 1.07 .. 2.21, median 1.76
 
 
+@pytest.mark.slow
 def test_pursuer_and_evader_never_hit_the_walls(runs):
     for r in runs:
         assert r["chase"]["wall_collisions"] == [0, 0]
         assert r["idle"]["wall_collisions"] == [0, 0]
 
 
+@pytest.mark.slow
 def test_forward_mode_chases_like_inverse_mode():
     # command_for turns the twists into wheel speeds: the same chase, to rounding
     poses = random_starts(3)

@@ -243,6 +243,7 @@ def _maze_caster() -> RayCaster:
     return RayCaster(maze(1.0))
 
 
+@pytest.mark.slow
 def test_empty_space_skipping_gives_identical_results():
     rng = np.random.default_rng(11)
     occ = np.kron(rng.random((16, 16)) < 0.12, np.ones((12, 12), dtype=bool))
@@ -332,6 +333,7 @@ def test_box_broad_phase_matches_brute_force_reference():
     assert n_finite > 100
 
 
+@pytest.mark.slow
 def test_many_robots_threads_and_kernel_function_agree():
     rng = np.random.default_rng(9)
     grid = maze(0.5)

@@ -36,6 +36,7 @@ def test_readme_has_exactly_two_commands_and_ci_runs_the_test_one():
     assert tests in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
 
 
+@pytest.mark.slow
 def test_readme_main_command_serves_the_app_on_localhost():
     main = _commands()[0]
     serve = shlex.split(main.split("&&")[-1])
@@ -97,6 +98,7 @@ def _listeners(port: int) -> list[str]:
     return out
 
 
+@pytest.mark.slow
 def test_readme_headless_run_writes_its_outputs(tmp_path):
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     section = text.split("## Headless runs", 1)[1].split("\n## ", 1)[0]

@@ -21,6 +21,8 @@ from agvsim.record.mcap_file import scan_records  # noqa: E402
 from agvsim.record.mcap_reader import Recording  # noqa: E402
 from agvsim.scenario import build, load_scenario  # noqa: E402
 
+pytestmark = pytest.mark.slow  # killed subprocess runs
+
 ROOM = {
     "name": "kill room",
     "world": {"picture": "########\n#......#\n#......#\n#......#\n########"},

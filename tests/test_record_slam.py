@@ -16,6 +16,8 @@ from agvsim.scenario import build, parse_scenario  # noqa: E402
 from agvsim.slam.offline import open_log, run_offline  # noqa: E402
 from agvsim.slam.recording import McapScanLog, interpolate_poses  # noqa: E402
 
+pytestmark = pytest.mark.slow  # SLAM on recordings
+
 SCENARIO = {
     "name": "slam room",
     "world": {"picture": "##########\n#........#\n#..##....#\n#........#\n##########"},

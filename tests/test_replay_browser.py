@@ -9,10 +9,13 @@ from __future__ import annotations
 import io
 
 import numpy as np
+import pytest
 
 from agvsim.bench_app import FLAGS, free_port
 
 from helpers import CHROMIUM, need_browser, wait_for
+
+pytestmark = pytest.mark.slow  # a real browser
 
 ROOM = {
     "name": "replay room",

@@ -110,12 +110,14 @@ def test_a_row_is_what_agvsim_run_reports(clean, tmp_path):
     assert row["r.final_x_m"] == robot["final_pose"]["x_m"]
 
 
+@pytest.mark.slow  # starts worker processes
 def test_local_processes_give_the_same_table(clean, tmp_path):
     pool = run_sweep(write(tmp_path, GRID), out_dir=tmp_path / "out", workers=2, plots=False)
     assert pool.executed == 12
     assert without_wall(pool.table).equals(without_wall(clean.table))
 
 
+@pytest.mark.slow
 def test_ray_gives_the_same_table(clean, tmp_path):
     pytest.importorskip("ray")
     on_ray = run_sweep(

@@ -12,6 +12,8 @@ from agvsim.runner import run_scenario  # noqa: E402
 from agvsim.scenario import build, parse_scenario  # noqa: E402
 from agvsim.viz.video import VideoRecorder  # noqa: E402
 
+pytestmark = pytest.mark.slow  # video encoding
+
 ROOM = {
     "name": "video room",
     "duration_s": 1.0,

@@ -111,6 +111,7 @@ def _tour(model: str, mode: str, side: str, sensor: str = "lidar"):
         ("mecanum", "forward", "left", "rangers"),  # the four rangers alone
     ],
 )
+@pytest.mark.slow
 def test_tour_of_fig16_comes_back_having_covered_the_corridors(model, mode, side, sensor):
     sim, res = _tour(model, mode, side, sensor)
     print(f"{model} {mode} {side} {sensor}: {res}")
@@ -123,6 +124,7 @@ def test_tour_of_fig16_comes_back_having_covered_the_corridors(model, mode, side
     assert res["seen_fraction"] >= 0.99
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["inverse", "forward"])
 @pytest.mark.parametrize("model", list(ROBOTS))
 def test_every_model_follows_the_wall_without_touching_it(model, mode):
@@ -164,6 +166,7 @@ def test_a_wall_ahead_makes_it_turn_away_from_the_wall_side():
         assert sign * sim.state.poses[0, 2] > 0.2  # left follower turns right, and back
 
 
+@pytest.mark.slow
 def test_same_seed_same_tour():
     a, b = (_follower_sim("tricycle", "forward", "left") for _ in range(2))
     a.run(40.0)

@@ -79,6 +79,10 @@ def serve(
                 f"warning: listening on {host}: anyone on your network can open it", style="yellow"
             )
 
+    out.print(
+        "preparing the app (the first run compiles the simulation kernels: about 30 s)...",
+        highlight=False,
+    )
     try:
         serve_app(
             scenario,
@@ -254,18 +258,31 @@ def run(
             f"final ({p['x_m']:.2f}, {p['y_m']:.2f}, "
             f"{p['theta_rad']:.2f} rad)"
         )
+        if rb.get("controller"):
+            out.print(f"  {'':<12} {_shown(rb['controller'])}")
     for name, values in data.get("metrics", {}).items():
-        shown = ", ".join(
-            f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}" for k, v in values.items()
+        out.print(f"  metric {name}: {_shown(values)}")
+    for name, sc in data.get("slam", {}).items():
+        err_m = sc.get("trajectory_error", {}).get("mean_m")
+        iou = sc.get("map", {}).get("tolerant", {}).get("iou")
+        out.print(
+            f"  slam {name}: map IoU {iou:.3f}, mean path error {err_m:.3f} m (in {sc['dir']}/)"
+            if iou is not None and err_m is not None
+            else f"  slam {name}: in {sc['dir']}/"
         )
-        out.print(f"  metric {name}: {shown}")
     if r["status"] != "completed":
         out.print(f"  status: {r['status']}")
-    out.print(
-        f"outputs: {out_dir}/summary.json, trajectory.csv"
-        + ("" if no_plot else ", plot.png")
-        + ("" if no_mcap else ", run.mcap")
-        + (", top.mp4" if video else "")
+    written = ["summary.json", "trajectory.csv"] + ([] if no_plot else ["plot.png"])
+    written += [] if no_mcap else ["run.mcap"]
+    written += sorted(p.name for p in Path(out_dir).glob("*.mp4"))
+    written += [f"{s['dir']}/" for s in data.get("slam", {}).values()]
+    out.print(f"outputs in {out_dir}/: " + ", ".join(written))
+
+
+def _shown(values: dict) -> str:
+    """``key value, ...`` with floats to 2 decimals."""
+    return ", ".join(
+        f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}" for k, v in values.items()
     )
 
 
@@ -552,7 +569,11 @@ def models() -> None:
     from agvsim.kinematics import MODELS
 
     for name, cls in MODELS.items():
-        params = ", ".join(f"{f.name}={f.default}" for f in fields(cls) if f.default is not MISSING)
+        params = ", ".join(
+            f"{f.name}={f.default:.6g}" if isinstance(f.default, float) else f"{f.name}={f.default}"
+            for f in fields(cls)
+            if f.default is not MISSING
+        )
         out.print(f"[bold]{name}[/bold]: wheels {list(cls.wheel_names)}; {params}")
 
 

@@ -103,6 +103,7 @@ def run_slam(truth: np.ndarray, seed: int = 0) -> tuple[GraphSlam, np.ndarray, n
     return slam, odom, slam.trajectory()[1]
 
 
+@pytest.mark.slow
 def test_loop_closes_on_revisit_and_beats_odometry() -> None:
     truth = loop_path(1.4)
     slam, odom, est = run_slam(truth)
@@ -206,6 +207,7 @@ def test_look_alike_closures_do_not_confirm_each_other() -> None:
     assert det.verify(closure(30 + cfg.confirm_gap, *later, submap=1)) == []
 
 
+@pytest.mark.slow
 def test_intel_slice_runs_and_improves_on_odometry(tmp_path: Path) -> None:
     root = datasets_dir()
     if root is None or not (root / "intel" / "intel.clf.gz").is_file():

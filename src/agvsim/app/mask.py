@@ -100,6 +100,48 @@ def _dyn_get(block: dict, key: str) -> Any:
     return block
 
 
+UNITS = (("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_rad", "rad"), ("_deg", "deg"), ("_hz", "Hz"),
+         ("_px", "px"), ("_m", "m"), ("_s", "s"))  # fmt: skip
+
+
+def plain_label(name: str) -> str:
+    """A parameter's name as the panel shows it: ``wheel_radius_m`` -> ``wheel radius (m)``,
+    ``max_steer_rate_rad_s`` -> ``max steer rate (rad/s)``."""
+    for suffix, unit in UNITS:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return f"{name[: -len(suffix)].replace('_', ' ')} ({unit})"
+    return name.replace("_", " ")
+
+
+def fields_in_error(problems: list[str], robot: dict) -> dict[str, str]:
+    """Mask field key -> the problem that names it, for the scenario schema's ``problems``
+    about the robot entry ``robot`` (``robots[k].body.length_m: ...``,
+    ``robots[k].sensors[1].lidar.range_max_m: ...``, ``robots[k].controller...``)."""
+    out: dict[str, str] = {}
+    kinds = [s.get("type") for s in robot.get("sensors", [])]
+    for text in problems:
+        path = text.split(":", 1)[0]
+        parts = path.split(".")[1:] if path.startswith("robots[") else path.split(".")
+        if not parts:
+            continue
+        head = parts[0]
+        if head in ("params", "body", "pose") and len(parts) > 1:
+            out.setdefault(f"{head}.{parts[1]}", text)
+        elif head in ("name", "model", "mode"):
+            out.setdefault(head, text)
+        elif head.startswith("sensors["):
+            try:
+                kind = kinds[int(head[len("sensors[") : -1])]
+            except (ValueError, IndexError):
+                continue
+            key = parts[2] if len(parts) > 2 else ""
+            target = f"sensors.{kind}.{key}"
+            out.setdefault(target if key else f"sensors.{kind}", text)
+        elif head == "controller":
+            out.setdefault("controller.settings", text)
+    return out
+
+
 def _default(robot: dict, key: str, default: Any) -> Any:
     """The value the panel shows for an unset sensor key: the schema's default, or for the
     camera's height the one agvsim.scenario derives (5 cm above the body)."""
@@ -142,9 +184,10 @@ def mask_fields(robot: dict, allow_python: bool = False) -> list[Field]:
         v = params.get(f.name, f.default)
         if isinstance(f.default, str):
             opts = ("ackermann", "parallel") if f.name == "steering_geometry" else (str(v),)
-            out.append(Field(f"params.{f.name}", f.name, "dropdown", v, opts))
+            out.append(Field(f"params.{f.name}", plain_label(f.name), "dropdown", v, opts))
         else:
-            out.append(Field(f"params.{f.name}", f.name, "number", float(v), step=0.01))
+            label = plain_label(f.name)
+            out.append(Field(f"params.{f.name}", label, "number", float(v), step=0.01))
     out += [
         Field("body.length_m", "body length (m)", "number", body.get("length_m", 0.6)),
         Field("body.width_m", "body width (m)", "number", body.get("width_m", 0.45)),

@@ -14,13 +14,14 @@ from typing import Any
 import numpy as np
 import viser
 
-from agvsim.app.mask import Field, MaskError, mask_fields, robot_from_mask
+from agvsim.app.mask import Field, MaskError, fields_in_error, mask_fields, robot_from_mask
 from agvsim.app.session import SPEEDS, EditError, Session
 from agvsim.kinematics import MODELS
 from agvsim.scenario import ScenarioError
 from agvsim.sim.spec import WALL_HEIGHT_M
 
 VIEWS = ("panoramic", "top plan", "chase")
+ONBOARD = "onboard camera"  # offered while the picked robot has a camera
 KEYS = {
     "W": "up",
     "arrowup": "up",
@@ -59,8 +60,13 @@ class Panel:
         self._overlay_due = 0.0
         self.view_of: dict[int, str] = {}  # client id -> view
         self._mask_widgets: dict[str, Any] = {}
+        self._mask_hints: dict[str, str | None] = {}
         self._mask_folder: Any = None
-        self._plot_layout = None
+        self.apply_msg: Any = None  # the result of Apply, next to the button
+        self._apply_button: Any = None
+        self._apply_note = ""
+        self._plot_layout: tuple | None = None
+        self.view_pick: dict[int, Any] = {}  # client id -> its own view dropdown
         # GUI structure changes come from callbacks and from the refresh loop: one at a time
         self._gui_lock = threading.RLock()
         gui = server.gui
@@ -111,13 +117,8 @@ class Panel:
         )
         self.speed = gui.add_dropdown("speed", tuple(SPEEDS), initial_value=s.speed_label)
         self.speed.on_update(lambda _: self._do(lambda: s.set_speed(self.speed.value)))
-        self.view = gui.add_dropdown(
-            "view",
-            VIEWS,
-            initial_value="panoramic",
-            hint="chase follows the robot picked in the Robot tab",
-        )
-        self.view.on_update(lambda e: self._set_view(e.client, self.view.value))
+        # each browser tab gets its own view dropdown here (add_client)
+        self._view_order = gui.add_markdown("").order
         self.keyboard = gui.add_checkbox(
             "drive with keys",
             initial_value=False,
@@ -244,11 +245,54 @@ class Panel:
         self.session.key(name)
 
     # ------------------------------------------------------------------ views
+    def views(self) -> tuple[str, ...]:
+        """The views a tab can pick: the onboard camera's only while the picked robot has one."""
+        return (*VIEWS, ONBOARD) if self._camera_of_selected() is not None else VIEWS
+
+    def _camera_of_selected(self) -> tuple[np.ndarray, Any] | None:
+        """(pose, CameraSpec) of the picked robot's first camera, or None."""
+        s = self.session
+        with s.lock:
+            try:
+                i = s.sim.robot_index(self.selected)
+            except (KeyError, ValueError):
+                return None
+            cams = s.sim.robots[i].cameras
+            return (s.sim.state.poses[i].copy(), cams[0]) if cams else None
+
+    def add_client(self, client: Any) -> None:
+        """A new browser tab: its own view dropdown (starting on the panoramic view, whatever
+        other tabs show) in the Run tab."""
+        with self._gui_lock, self._run_tab:
+            pick = client.gui.add_dropdown(
+                "view",
+                self.views(),
+                initial_value="panoramic",
+                hint="this browser tab's view; chase and onboard camera follow the robot "
+                "picked in the Robot tab",
+                order=self._view_order,
+            )
+        self.view_pick[client.client_id] = pick
+        pick.on_update(lambda _: self._set_view(client, pick.value))
+        self._set_view(client, "panoramic")
+
+    def remove_client(self, client_id: int) -> None:
+        self.view_of.pop(client_id, None)
+        self.view_pick.pop(client_id, None)
+
+    def _refresh_view_options(self) -> None:
+        """Offer the onboard camera to every tab while the picked robot has one."""
+        views = self.views()
+        for cid, pick in list(self.view_pick.items()):
+            if tuple(pick.options) != views:
+                value = pick.value if pick.value in views else "chase"
+                pick.options = views
+                pick.value = value
+                self.view_of[cid] = value
+
     def _set_view(self, client: Any, view: str) -> None:
-        if client is None:
-            for c in self.server.get_clients().values():
-                self._set_view(c, view)
-            return
+        if client.client_id not in self.server.get_clients():
+            return  # the tab has closed
         self.view_of[client.client_id] = view
         from agvsim.app import shapes
 
@@ -258,9 +302,12 @@ class Panel:
         elif view == "top plan":
             self._place(client, shapes.camera_top(grid, client.camera.fov))
 
-    @staticmethod
-    def _place(client: Any, cam: Any) -> None:
+    def _place(self, client: Any, cam: Any, fov_rad: float | None = None) -> None:
+        if client.client_id not in self.server.get_clients():
+            return  # closed: nothing may be queued on its connection
         with client.atomic():
+            if fov_rad is not None:
+                client.camera.fov = fov_rad
             client.camera.up_direction = cam.up
             client.camera.position = cam.position
             client.camera.look_at = cam.look_at
@@ -269,12 +316,10 @@ class Panel:
         """Move chase cameras with their robot (every frame)."""
         from agvsim.app import shapes
 
-        chasers = [
-            c
-            for c in self.server.get_clients().values()
-            if self.view_of.get(c.client_id) == "chase"
-        ]
-        if not chasers:
+        clients = self.server.get_clients().values()
+        chasers = [c for c in clients if self.view_of.get(c.client_id) == "chase"]
+        riders = [c for c in clients if self.view_of.get(c.client_id) == ONBOARD]
+        if not chasers and not riders:
             return
         s = self.session
         with s.lock:
@@ -285,12 +330,20 @@ class Panel:
         cam = shapes.camera_chase(pose)
         for c in chasers:
             self._place(c, cam)
+        onboard = self._camera_of_selected()
+        for c in riders:
+            if onboard is None:
+                self._place(c, cam)
+                continue
+            pose, spec = onboard
+            self._place(c, shapes.camera_onboard(pose, spec), fov_rad=spec.vfov_rad)
 
     # ------------------------------------------------------------------ the mask
     def _select(self, name: str) -> None:
         if name not in self.session.robot_names():
             return
         self.selected = name
+        self._apply_note = ""
         self._build_mask(self.session.robot_config(name))
         self._plot_layout = None
 
@@ -301,6 +354,11 @@ class Panel:
     def _build_mask_locked(self, robot: dict) -> None:
         gui = self.server.gui
         if self._mask_folder is not None:
+            # children first: removing a folder first makes the browser drop them with it and
+            # then complain about each removal that follows ("non-existent component")
+            for handle in (*self._mask_widgets.values(), self._apply_button, self.apply_msg):
+                if handle is not None:
+                    handle.remove()
             self._mask_folder.remove()
         self._mask_widgets = {}
         self._draft = robot
@@ -309,8 +367,11 @@ class Panel:
             self._mask_folder = folder
             for f in mask_fields(robot, allow_python=self.session.allow_python):
                 self._mask_widgets[f.key] = self._widget(f)
+                self._mask_hints[f.key] = f.hint or None
             apply = gui.add_button("Apply", icon=viser.Icon.CHECK)
             apply.on_click(lambda _: self._apply())
+            self._apply_button = apply
+            self.apply_msg = gui.add_markdown(self._apply_note)
         model = self._mask_widgets["model"]
         model.on_update(lambda _: self._model_changed())
 
@@ -341,19 +402,40 @@ class Panel:
         self._build_mask(draft)
 
     def _apply(self) -> None:
-        name = self.selected
-        try:
-            robot = robot_from_mask(self._draft, self._values())
-            self.session.apply_robot(name, robot)
-        except ScenarioError as err:
-            self.mask_msg.content = _error_md("\n".join(err.problems))
-            return
-        except (MaskError, EditError) as err:
-            self.mask_msg.content = _error_md(str(err))
-            return
-        self.selected = robot["name"]
-        self.mask_msg.content = "<span style='color:#1e8449'>&#10004; applied</span>"
-        self._build_mask(self.session.robot_config(self.selected))
+        """Apply the mask; the result (or the refusal, with the fields in error marked) shows
+        under the Apply button (and stays there until the next Apply or another robot)."""
+        with self._gui_lock:  # the refresh loop must not rebuild the mask meanwhile
+            name = self.selected
+            self.mask_msg.content = ""
+            self._apply_note = ""
+            robot: dict = {}
+            try:
+                robot = robot_from_mask(self._draft, self._values())
+                note = self.session.apply_robot(name, robot)
+            except ScenarioError as err:
+                self._show_apply_error(err.problems, robot)
+                return
+            except (MaskError, EditError) as err:
+                self._show_apply_error([str(err)], robot)
+                return
+            self.selected = robot["name"]
+            self._apply_note = f"<span style='color:#1e8449'>&#10004; {note}</span>"
+            # the mask, robot list and plots (new history: they start again), once
+            self._follow_layout(self.session.robot_names(), self.session.layout)
+
+    def _show_apply_error(self, problems: list[str], robot: dict) -> None:
+        """The problems under Apply; each field they name gets a warning sign and the problem
+        as its hint (the others lose theirs)."""
+        bad = fields_in_error(problems, robot) if robot else {}
+        with self._gui_lock:
+            for key, w in self._mask_widgets.items():
+                label = w.label.removeprefix("\u26a0 ")
+                if key in bad:
+                    w.label, w.hint = "\u26a0 " + label, bad[key]
+                elif label != w.label:
+                    w.label, w.hint = label, self._mask_hints.get(key)
+            if self.apply_msg is not None:
+                self.apply_msg.content = _error_md("\n".join(problems))
 
     # ------------------------------------------------------------------ world tab
     def _build_world(self) -> None:
@@ -363,6 +445,12 @@ class Panel:
             "edit maze",
             initial_value=False,
             hint="click a floor cell to add a wall, a wall to remove it",
+        )
+        self.place = gui.add_checkbox(
+            "place robots",
+            initial_value=False,
+            hint="click the floor (best in the top plan view) to move the robot picked in the "
+            "Robot tab there, at the nearest free spot",
         )
         self.world_msg = gui.add_markdown("")
         self.maze_rows = gui.add_number(
@@ -392,11 +480,22 @@ class Panel:
 
         @self.server.scene.on_click()
         def _(event: Any) -> None:
-            if self.edit.value:
+            if self.place.value:
+                self._world_do(lambda: self._place_robot(event.ray_origin, event.ray_direction))
+            elif self.edit.value:
                 self._world_do(lambda: self._click_cell(event.ray_origin, event.ray_direction))
 
     def _world_do(self, fn: Any) -> None:
         self._do(fn, self.world_msg)
+
+    def _place_robot(self, origin: Any, direction: Any) -> None:
+        o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
+        if d[2] >= -1e-9:
+            self.world_msg.content = _error_md("that click is not on the floor")
+            return
+        t = -o[2] / d[2]
+        note = self.session.move_robot(self.selected, o[0] + t * d[0], o[1] + t * d[1])
+        self.world_msg.content = note
 
     def _click_cell(self, origin: Any, direction: Any) -> None:
         cell = pick_cell(self.session, np.asarray(origin), np.asarray(direction))
@@ -424,6 +523,18 @@ class Panel:
             return
         self.scene.set_overlay(*(live or (None,)))
 
+    def _follow_layout(self, names: list[str], layout: int) -> None:
+        """The robots or the world changed: the robot list, the mask and the plots follow."""
+        s = self.session
+        self._known_layout = layout
+        if self.selected not in names:
+            self.selected = names[0]
+        self.robot_pick.options = tuple(names)
+        self.robot_pick.value = self.selected
+        self._build_mask(s.robot_config(self.selected))
+        self._plot_layout = None
+        self.keyboard.value = s.keyboard_robot is not None
+
     def _refresh_locked(self) -> None:
         s = self.session
         with s.lock:
@@ -436,18 +547,12 @@ class Panel:
             )
             error = s.error
         if layout != self._known_layout:
-            self._known_layout = layout
-            if self.selected not in names:
-                self.selected = names[0]
-            self.robot_pick.options = tuple(names)
-            self.robot_pick.value = self.selected
-            self._build_mask(s.robot_config(self.selected))
-            self._plot_layout = None
-            self.keyboard.value = s.keyboard_robot is not None
+            self._follow_layout(names, layout)
         if self.speed.value != s.speed_label:
             self.speed.value = s.speed_label
         self.status.content = status + (("<br/>" + _error_md(error)) if error else "")
         self._refresh_video()
+        self._refresh_view_options()
         self._refresh_numbers()
         self._refresh_camera()
 
@@ -525,8 +630,11 @@ class Panel:
             f"state **{state}**, collisions: walls {coll[0]}, robots {coll[1]}\n\n"
             f"| wheel | rad/s |\n|---|---|\n{rows}"
         )
-        if hw is None or len(t) < 2:
+        if hw is None or ht is None:
             return
+        if len(t) < 2:  # a robot just rebuilt: its first sample, held for a moment
+            t = np.array([t[0] - 0.05, t[0]])
+            hw, ht = np.repeat(hw, 2, axis=0), np.repeat(ht, 2, axis=0)
         keep = t >= t[-1] - 10.0
         t, hw, ht = t[keep], hw[keep], ht[keep]
         # the plots are made once, with a series for each of up to four wheels, and never
@@ -568,9 +676,12 @@ class Panel:
                 )
             self._plot_layout = key
             return
-        if self._plot_layout != key:
+        if self._plot_layout != key:  # another robot, or this one rebuilt: its own history
             self._plot_layout = key
-            self.plot_wheels.series = series
+            if tuple(self.plot_wheels.series) != series:
+                # only when the wheels differ: the browser redraws an emptied plot when the
+                # series are sent again (the empty plot after Apply)
+                self.plot_wheels.series = series
         self.plot_wheels.data = (t, *hw4.T)
         self.plot_twist.data = (t, *ht.T)
 

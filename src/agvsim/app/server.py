@@ -80,10 +80,10 @@ class App:
             client.add_notification("Upload refused", message, color="red", auto_close_seconds=10.0)
 
     def _connected(self, client) -> None:
-        self.panel._set_view(client, self.panel.view.value)
+        self.panel.add_client(client)
 
     def _disconnected(self, client) -> None:
-        self.panel.view_of.pop(client.client_id, None)
+        self.panel.remove_client(client.client_id)
         if not self.server.get_clients():
             # nobody is watching the keyboard robot any more: it stops (a dead-man switch)
             self.session.stop_keyboard_motion()

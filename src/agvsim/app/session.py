@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 
 from agvsim.app import uploads
+from agvsim.app.placement import place_clear
 from agvsim.control.teleop import Teleop
 from agvsim.scenario import Scenario, ScenarioError, build, load_scenario, parse_scenario
 from agvsim.sim.engine import ControllerError, Simulation
@@ -137,8 +138,10 @@ class Session:
         self.history = {r.name: History() for r in self.sim.robots}
         self._sample()
 
-    def _replace(self, cfg: dict[str, Any], fresh: set[str] = frozenset()) -> None:  # type: ignore[assignment]
-        """Rebuild from ``cfg``; robots not in ``fresh`` keep their live state."""
+    def _replace(self, cfg: dict[str, Any], fresh: set[str] = frozenset()) -> list[str]:  # type: ignore[assignment]
+        """Rebuild from ``cfg``; robots not in ``fresh`` keep their live state, those in
+        ``fresh`` start at their initial pose if it is free, else at the nearest free pose.
+        Returns a note for each fresh robot placed elsewhere."""
         new = self._build(cfg)
         old = self.sim
         st, ost = new.state, old.state
@@ -160,6 +163,12 @@ class Session:
             ):
                 getattr(st, name)[i] = getattr(ost, name)[j]
         st.t_s, st.step = ost.t_s, ost.step
+        notes = []
+        for i, r in enumerate(new.robots):
+            if r.name in fresh:
+                note = place_clear(new, i)
+                if note:
+                    notes.append(note)
         new._sense(force=True)
         self.config, self.sim = cfg, new
         old_hist = self.history
@@ -168,6 +177,7 @@ class Session:
             for r in new.robots
         }
         self.layout += 1
+        return notes
 
     # ------------------------------------------------------------------ run controls
     def play(self) -> None:
@@ -344,17 +354,21 @@ class Session:
                 return k
         raise EditError(f"no robot named {name!r}; robots: {self.robot_names()}")
 
-    def apply_robot(self, name: str, robot: dict[str, Any]) -> None:
+    def apply_robot(self, name: str, robot: dict[str, Any]) -> str:
         """Replace robot ``name`` with ``robot`` (the mask's "apply"): validated like a scenario
-        file, the robot rebuilt at ``robot['pose']``, the others carry on. Raises ScenarioError
-        with the validation messages; nothing changes then."""
+        file, the robot rebuilt at ``robot['pose']`` (or, where another robot or a wall is in
+        the way now, at the nearest free pose), the others carry on. Returns what was done, to
+        show the user. Raises ScenarioError with the validation messages; nothing changes
+        then."""
         with self.lock:
             cfg = copy.deepcopy(self.config)
             k = self._index(name)
             cfg["robots"][k] = copy.deepcopy(robot)
             if self.keyboard_robot == name and robot.get("name") != name:
                 raise EditError("stop keyboard driving before renaming this robot")
-            self._replace(cfg, fresh={robot.get("name", name)})
+            new_name = robot.get("name", name)
+            notes = self._replace(cfg, fresh={new_name})
+            return "applied: " + ("; ".join(notes) if notes else f"{new_name} at its initial pose")
 
     def add_robot(self, model: str, x_m: float, y_m: float, theta_deg: float = 0.0) -> str:
         """A new robot of ``model`` with the four rangers and the thesis avoidance."""
@@ -484,6 +498,25 @@ class Session:
                 tele.stop()
             else:
                 tele.set_twist(vx, vy, om)
+
+    def move_robot(self, name: str, x_m: float, y_m: float) -> str:
+        """Put robot ``name`` (heading kept) at the free pose nearest to (x, y) now, as the
+        app's "place robots" click does; its initial pose stays. Returns what was done."""
+        from agvsim.app.placement import MAX_SEARCH_M, nearest_free_pose
+
+        with self.lock:
+            i = self.sim.robot_index(name)
+            th = float(self.sim.state.poses[i, 2])
+            spot = nearest_free_pose(self.sim, i, (float(x_m), float(y_m), th))
+            if spot is None:
+                raise EditError(f"no free place for {name} within {MAX_SEARCH_M:g} m of that point")
+            self.sim.state.poses[i] = spot
+            self.sim.state.odom_poses[i] = spot
+            self.sim._sense(force=True)
+            h = self.history.get(name)
+            if h is not None:
+                h.trail.clear()
+            return f"{name} placed at ({spot[0]:.2f}, {spot[1]:.2f})"
 
     # ------------------------------------------------------------------ the maze
     def cell_at(self, x_m: float, y_m: float) -> tuple[int, int] | None:

@@ -17,6 +17,7 @@ World frame: x east, y north, z up, metres; quaternions are (w, x, y, z).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -327,3 +328,15 @@ def camera_chase(pose: np.ndarray, distance_m: float = 3.0, height_m: float = 1.
     return CameraPose(
         (x - distance_m * c, y - distance_m * s, height_m), (x + 1.5 * c, y + 1.5 * s, 0.3)
     )
+
+
+def camera_onboard(pose: np.ndarray, spec: Any) -> CameraPose:
+    """Where a robot's onboard camera (a ``CameraSpec``: mount x, y, height, yaw, pitch down)
+    is and what it looks at, for a robot at ``pose`` (x, y, theta): the thesis's sensor view."""
+    x, y, th = (float(v) for v in pose[:3])
+    c, s = np.cos(th), np.sin(th)
+    mx, my = (float(v) for v in spec.mount_xy_m)
+    px, py, pz = x + c * mx - s * my, y + s * mx + c * my, float(spec.mount_z_m)
+    yaw, pitch = th + float(spec.mount_yaw_rad), float(spec.pitch_rad)
+    d = (np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), -np.sin(pitch))
+    return CameraPose((px, py, pz), (px + d[0], py + d[1], pz + d[2]))

@@ -22,7 +22,9 @@ robot in the body's path ahead counts as an obstacle ahead (the robot turns righ
 for a wall), one in the path behind as one behind (a car's K-turn stops reversing), and every
 command is slowed to stop ``sight.stop_gap_m`` short of a robot in the way
 (``RobotSight.limit``). The single front ranger of the thesis misses a robot coming in at an
-angle; the lidar does not.
+angle; the lidar does not. Two robots can hold each other still (one turning on the spot next
+to a car that has no room either way): a robot held for ``hold_s`` backs away, forwards or
+backwards, whichever way has more room, then turns again.
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ class ObstacleAvoidance:
         snap: bool = True,
         heading_source: str = "true_pose",
         sight: RobotSight | None = None,
+        hold_s: float = 1.5,
     ):
         self.sensor = sensor
         self.front = np.asarray(front_beams, dtype=np.int64)
@@ -76,6 +79,7 @@ class ObstacleAvoidance:
             )
         self.heading_source = heading_source
         self.sight = sight
+        self.hold_s = hold_s
 
     def reset(self, k: int, rng: np.random.Generator) -> None:
         self.state = np.full(k, DRIVE, dtype=np.int64)
@@ -83,6 +87,7 @@ class ObstacleAvoidance:
         self.until = np.zeros(k)
         self.spin = np.broadcast_to(self.can_spin, (k,)).copy()
         self.back_dir = -np.ones(k)
+        self.held_since = np.full(k, np.nan)  # since when another robot holds it still
         self._started = False
         self._left = self._right = np.zeros(0, dtype=np.int64)
 
@@ -125,6 +130,7 @@ class ObstacleAvoidance:
         )
         k = len(heading)
         robot_front, robot_back = np.full(k, np.inf), np.full(k, np.inf)
+        walls_back = np.full(k, np.inf)
         blocked = np.zeros(k, dtype=bool)
         sight = self.sight if self.sight is not None and self.sight.sensor in obs.ranges else None
         if sight is not None:  # other robots on the lidar, as distances from the reference point
@@ -133,7 +139,9 @@ class ObstacleAvoidance:
             ahead = sight.free_m(obs.true_pose, scan, 0.0)
             walls = sight.free_m(obs.true_pose, scan, 0.0, walls_margin_m=0.03)
             robot_front = np.minimum(ahead, walls) + fp.half_length_m + fp.offset_x_m
-            robot_back = sight.free_m(obs.true_pose, scan, np.pi) + fp.half_length_m - fp.offset_x_m
+            tail = fp.half_length_m - fp.offset_x_m
+            robot_back = sight.free_m(obs.true_pose, scan, np.pi) + tail
+            walls_back = sight.free_m(obs.true_pose, scan, np.pi, walls_margin_m=0.03) + tail
             blocked = ahead < sight.stop_gap_m + 0.1
         cmd = np.zeros((k, 3))
         _avoid_step(
@@ -157,8 +165,42 @@ class ObstacleAvoidance:
             cmd,
         )
         if sight is not None:
-            cmd = sight.limit(cmd, obs.true_pose, scan)
+            f = sight.factor(cmd, obs.true_pose, scan)
+            self._give_way(cmd, f, obs.t_s, ranges, robot_front, robot_back, walls_back)
+            cmd = cmd * sight.factor(cmd, obs.true_pose, scan)[:, None]
         return cmd
+
+    def _give_way(
+        self,
+        cmd: np.ndarray,
+        factor: np.ndarray,
+        t_s: float,
+        ranges: np.ndarray,
+        robot_front: np.ndarray,
+        robot_back: np.ndarray,
+        walls_back: np.ndarray,
+    ) -> None:
+        """Robots that another one has held still for ``hold_s`` (two robots that block each
+        other's turns) back away, forwards or backwards, whichever way has more room, for
+        ``backoff_s``; then they turn again. Writes their new commands into ``cmd``."""
+        wants = np.abs(cmd).max(axis=1) > 1e-6
+        held = wants & (factor < 0.05)
+        self.held_since[~held] = np.nan
+        self.held_since[held & np.isnan(self.held_since)] = t_s
+        due = held & (t_s - self.held_since >= self.hold_s)
+        if not due.any():
+            return
+        r = np.where(ranges == -np.inf, 0.0, ranges)
+        front = np.minimum(r[:, self.front].min(axis=1), robot_front)
+        back = np.minimum(robot_back, walls_back)
+        if self.back.size:
+            back = np.minimum(back, r[:, self.back].min(axis=1))
+        for i in np.flatnonzero(due):
+            self.state[i] = BACKOFF
+            self.until[i] = t_s + self.backoff_s
+            self.back_dir[i] = 1.0 if front[i] > back[i] else -1.0
+            self.held_since[i] = np.nan
+            cmd[i] = (0.5 * self.speed * self.back_dir[i], 0.0, 0.0)
 
     def state_names(self) -> list[str]:
         return [STATE_NAMES[k] for k in self.state]

@@ -93,6 +93,20 @@ class MarkerSearch:
         self._heading: float | None = None  # explore: the heading chosen
         self._leg_start: tuple[float, float] | None = None
         self._free_ahead = math.inf
+        self._t_s = 0.0
+        self.found_at_s: float | None = None  # when the marker was first seen
+
+    def report(self) -> dict:
+        """What the search came to, for the run's summary."""
+        t = self.target
+        return {
+            "marker_id": self.marker_id,
+            "marker_found": t is not None,
+            "found_at_s": self.found_at_s,
+            "stopped_in_front": self.state_name == "done",
+            "marker_xy_m": None if t is None else [round(v, 4) for v in t.marker_xy_m],
+            "state": self.state_name,
+        }
 
     # ------------------------------------------------------------------ step
     def step(self, obs: Observation):
@@ -104,6 +118,7 @@ class MarkerSearch:
                 f"marker_search needs the camera {self.camera.name!r}; the observation has "
                 f"{sorted(images) or 'no cameras'}"
             )
+        self._t_s = float(obs.t_s)
         stamp = float(obs.image_stamps[self.camera.name])  # type: ignore[attr-defined]
         if stamp != self._stamp and self.state_name != "done":
             self._stamp = stamp
@@ -118,6 +133,8 @@ class MarkerSearch:
     def _on_frame(self, rgb: np.ndarray, depth: np.ndarray, x: float, y: float, th: float):
         target = self.locate(rgb, depth, (x, y, th))
         if target is not None and self.state_name != "align":
+            if self.found_at_s is None:
+                self.found_at_s = self._t_s
             self.target = target
             if self.state_name in ("scan", "explore"):
                 self.state_name = "approach"

@@ -296,9 +296,15 @@ class RobotSight:
         when contact is more than ``stop_s + slow_s`` away at the commanded twist, zero under
         ``stop_s`` (the whole twist is scaled: a path keeps its curvature)."""
         out = np.array(twists, dtype=np.float64, copy=True)
-        ttc = self.time_to_contact_s(out, poses, ranges)
-        f = np.clip((ttc - self.stop_s) / self.slow_s, 0.0, 1.0)
-        return out * f[:, None]
+        return out * self.factor(out, poses, ranges)[:, None]
+
+    def factor(
+        self, twists: np.ndarray, poses: np.ndarray, ranges: np.ndarray | ScanPoints
+    ) -> np.ndarray:
+        """(k,) the scale ``limit`` applies: 1 when contact is more than ``stop_s + slow_s``
+        away at the commanded twist, 0 under ``stop_s``, linear between."""
+        ttc = self.time_to_contact_s(np.asarray(twists, dtype=np.float64), poses, ranges)
+        return np.clip((ttc - self.stop_s) / self.slow_s, 0.0, 1.0)
 
 
 def sight_sensor(spec: object, min_beams: int = 16) -> str | None:
@@ -354,8 +360,7 @@ class KeepClear:
         else:  # a command of another shape: leave it alone
             return cmd
         pose = np.asarray(obs.true_pose, dtype=np.float64)[None, :]
-        ttc = self.sight.time_to_contact_s(twist, pose, scan.ranges[None, :])
-        f = float(np.clip((ttc[0] - self.sight.stop_s) / self.sight.slow_s, 0.0, 1.0))
+        f = float(self.sight.factor(twist, pose, scan.ranges[None, :])[0])
         if f >= 1.0:
             return cmd
         if isinstance(cmd, Twist):

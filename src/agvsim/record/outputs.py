@@ -108,6 +108,11 @@ def summary(sim: Simulation, wall_s: float, extra: dict[str, Any] | None = None)
                 "stopped_by_error": bool(st.stopped[i]),
             }
         )
+    for b in sim.bindings:  # what a behaviour came to (marker_search: was the marker found?)
+        report = getattr(b.controller, "report", None)
+        if not b.batch and callable(report):
+            for i in b.robots:
+                robots[int(i)]["controller"] = report()
     run = {
         "simulated_time_s": float(st.t_s),
         "steps": int(st.step),

@@ -94,6 +94,7 @@ def optimize_g2o_command(
         optimised = PoseGraph.from_arrays(
             result.poses, graph.edge_i, graph.edge_j, graph.measurements, graph.information
         )
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
         save_g2o(optimised, out)
         lines.append(f"  wrote         {out}")
     return "\n".join(lines)

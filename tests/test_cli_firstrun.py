@@ -1,0 +1,56 @@
+"""What the ``agvsim`` command tells a newcomer: errors before anything else, every output it
+wrote, numbers as people write them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from agvsim.cli import app
+
+ROOM = """\
+name: room with a camera
+duration_s: 0.3
+world:
+  picture: |
+    #######
+    #.....#
+    #.....#
+    #.....#
+    #######
+robots:
+  - name: agv
+    model: differential
+    sensors: [{type: camera, name: front, width_px: 32, height_px: 24}]
+    controller: {type: script, steps: [{duration_s: 10, twist: [0.2, 0.0]}]}
+"""
+
+
+def test_run_of_a_missing_file_says_so_first(tmp_path):
+    res = CliRunner().invoke(app, ["run", str(tmp_path / "nonexistent.yaml")])
+    assert res.exit_code == 2
+    assert "no such file" in res.output
+    assert "preparing" not in res.output and "compiles" not in res.output
+
+
+def test_models_prints_parameters_as_people_write_them():
+    res = CliRunner().invoke(app, ["models"])
+    assert res.exit_code == 0
+    assert "max_steer_rad=1.5708" in res.output
+    assert "1.5707963267948966" not in res.output
+
+
+@pytest.mark.slow  # writes videos (ffmpeg)
+def test_run_lists_every_video_it_wrote(tmp_path):
+    scenario = tmp_path / "room.yaml"
+    scenario.write_text(ROOM)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["run", str(scenario), "--out", str(out), "--video", "-q"])
+    assert res.exit_code == 0, res.output
+    videos = sorted(p.name for p in Path(out).glob("*.mp4"))
+    assert len(videos) == 2 and "top.mp4" in videos  # the top view and the camera
+    listed = res.output.split("outputs in", 1)[1]
+    for name in ("summary.json", "trajectory.csv", "plot.png", "run.mcap", *videos):
+        assert name in listed
