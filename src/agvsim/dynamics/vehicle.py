@@ -172,6 +172,7 @@ class Dynamics:
         # the speed controller is tuned for the empty robot: a load makes it slower
         b[K.B_GAIN] = (j_driven + spec.mass_kg * r * r / n_drive) / mot.time_constant_s
         b[K.B_GEAR], b[K.B_TMAX] = mot.gear_ratio, mot.torque_max_nm
+        b[K.B_MTAU] = mot.time_constant_s
         b[K.B_TSTALL] = (
             3.0 * mot.torque_max_nm if mot.stall_torque_nm is None else mot.stall_torque_nm
         )
@@ -227,6 +228,7 @@ class Dynamics:
         n, w = self.wheel.shape[:2]
         self.vel = np.zeros((n, 3))  # instantaneous twist at P
         self.phi = np.zeros((n, w))
+        self.last_targets = np.zeros((n, w))  # wheel-speed targets of the last step
         self.delta = np.asarray(steering, dtype=np.float64).copy()
         self.delta_rate = np.zeros(n)
         self.energy_j = np.zeros((n, w))  # motor work since reset
@@ -269,6 +271,7 @@ class Dynamics:
             np.ascontiguousarray(targets),
             np.ascontiguousarray(delta_target, dtype=np.float64),
             np.ascontiguousarray(freeze, dtype=np.bool_),
+            self.last_targets,
             self.vel,
             self.phi,
             self.delta,
