@@ -29,22 +29,25 @@ from numba import njit, prange
 # columns of the per-robot table ``body`` (D, NB)
 B_MASS, B_INERTIA, B_CX, B_CY, B_RADIUS, B_WHEELBASE, B_GAIN, B_GEAR = 0, 1, 2, 3, 4, 5, 6, 7
 B_TMAX, B_TSTALL, B_W0, B_VSLIP, B_MAXSUB, B_DMAX, B_RATE, B_SACC = 8, 9, 10, 11, 12, 13, 14, 15
-B_STAU, B_TYRE, B_STEER, B_NW, B_MTAU = 16, 17, 18, 19, 20
-NB = 21
+B_STAU, B_TYRE, B_STEER, B_NW, B_MTAU, B_LEVER = 16, 17, 18, 19, 20, 21
+NB = 22
 # columns of the per-wheel table ``wheel`` (D, W, NWC)
 W_PX, W_PY, W_BETA, W_GAMMA, W_KIND, W_DRIVEN, W_STEER, W_NORMAL, W_J = 0, 1, 2, 3, 4, 5, 6, 7, 8
-NWC = 9
+W_DIRS = 9  # 9-12: cos, sin of the rolling direction and of the force axis, unsteered
+NWC = 13
 KIND_2D = 0  # a standard wheel: friction in both directions (friction circle)
 KIND_1D = 1  # force only along the axis at angle gamma to the rolling direction (rollers)
 STEER_NONE, STEER_BICYCLE, STEER_ACKERMANN = 0, 1, 2
 MAX_SUBSTEPS = 100_000
 GAMMA = 1.0 - 1.0 / math.sqrt(2.0)  # SDIRK2: L-stable, second order
 REFINE_PER_TIME_CONSTANT = 0.0125  # the shortest sub-step, in controller time constants
+REFINE_MAX_S = 1e-3  # the shortest sub-step is at most this long
 MAX_LEVELS = 12  # halvings of a sub-step at most
-ERROR_TOL_M_S = 1e-3  # a sub-step is halved where its error estimate exceeds this
+ERROR_TOL_M_S = 1e-4  # a sub-step is halved where its error estimate exceeds this
 SERVO_STEP_S = 1e-3  # the steering servo's own step
 NEWTON_ITERATIONS = 30  # at most, per stage (two or three when nothing saturates)
-NEWTON_TOL_M_S = 1e-9  # converged when no velocity (or r phi) moves by more
+NEWTON_TOL_M_S = 1e-5  # converged when no velocity (or r phi) moved by more: the next
+# correction, quadratically smaller, is ~1e-9 m/s
 
 
 @njit(cache=True, error_model="numpy")
@@ -98,14 +101,16 @@ def motor_torque(
 def substep_count(body: np.ndarray, dt: float) -> tuple[int, int]:
     """Sub-steps of a step: ``n`` of at most max_substep_s (one by default: the method is
     L-stable, stiff contacts need no bound), each halved up to ``levels`` times where a wheel
-    crosses the friction law's kink or a motor's torque limit, down to REFINE_PER_TIME_CONSTANT
-    x the shorter of the motor's and the steering servo's time constants."""
+    crosses the friction law's kink or a motor's torque limit, where targets change and where
+    the error estimate is large, down to REFINE_PER_TIME_CONSTANT x the shorter of the motor's
+    and the steering servo's time constants, or REFINE_MAX_S if shorter."""
     tau = body[B_MTAU]
     if body[B_STEER] > 0.5:
         tau = min(tau, body[B_STAU])
     n = min(max(int(math.ceil(dt / body[B_MAXSUB] - 1e-9)), 1), MAX_SUBSTEPS)
     levels = 0
-    while levels < MAX_LEVELS and dt / n / (1 << levels) > REFINE_PER_TIME_CONSTANT * tau:
+    h_min = min(REFINE_PER_TIME_CONSTANT * tau, REFINE_MAX_S)
+    while levels < MAX_LEVELS and dt / n / (1 << levels) > h_min:
         levels += 1
     return n, levels
 
@@ -126,6 +131,10 @@ def wheel_angle(wheel: np.ndarray, delta: float, wheelbase: float) -> float:
 def set_directions(wheel: np.ndarray, nw: int, delta: float, wheelbase: float, dirs: np.ndarray):
     """dirs (W, 4): cos, sin of each wheel's rolling direction and of its force axis."""
     for i in range(nw):
+        if int(wheel[i, W_STEER]) == STEER_NONE:
+            for k in range(4):
+                dirs[i, k] = wheel[i, W_DIRS + k]
+            continue
         ang = wheel_angle(wheel[i], delta, wheelbase)
         gam = wheel[i, W_GAMMA]
         dirs[i, 0], dirs[i, 1] = math.cos(ang), math.sin(ang)
@@ -338,11 +347,14 @@ def step_robots(
     delta_rate: np.ndarray,  # (D,) in/out
     out_twist: np.ndarray,  # (D, 3) the step's equivalent constant twist
     out_angle: np.ndarray,  # (D, W) wheel rotation over the step, rad
-    out_steer: np.ndarray,  # (D, W) each wheel's rolling direction at the end, rad
+    steer_cols: np.ndarray,  # (D, S) the steered wheels' columns (model order), -1: none
+    out_steer: np.ndarray,  # (D, S) the steered wheels' rolling directions at the end, rad
     out_torque: np.ndarray,  # (D, W) wheel torque at the end, N m
     out_slip: np.ndarray,  # (D, W) slip speed |s| at the end, m/s
     out_work: np.ndarray,  # (D, W) motor work over the step, J
     out_nsub: np.ndarray,  # (D,) sub-steps taken
+    out_speed: np.ndarray,  # (D, 2) speed of P at the start and at the end, m/s
+    out_braking: np.ndarray,  # (D,) bool: every driven wheel's target is zero
 ) -> None:
     n_rob, n_w = poses.shape[0], wheel.shape[1]
     n_reg = regions.shape[0]
@@ -360,6 +372,12 @@ def step_robots(
         y0, y1, y2, a = ys_all[d, 0], ys_all[d, 1], ys_all[d, 2], ys_all[d, 3]
         tau1, tau2, slip = ws_all[d, 0], ws_all[d, 1], ws_all[d, 2]
         kap = kap_all[d]
+        out_speed[d, 0] = math.hypot(vel[d, 0], vel[d, 1])
+        braking = True
+        for i in range(nw):
+            if wh[i, W_DRIVEN] > 0.5 and abs(target[d, i]) > 1e-12:
+                braking = False
+        out_braking[d] = braking
         if freeze[d]:
             vel[d, :] = 0.0
             phi[d, :] = 0.0
@@ -376,9 +394,7 @@ def step_robots(
             mu_n[i] = mu * wh[i, W_NORMAL]
         n_sub, levels = substep_count(b, dt)
         cx, cy = b[B_CX], b[B_CY]
-        lever = 0.0  # the farthest wheel from the centre of mass, m
-        for i in range(nw):
-            lever = max(lever, math.hypot(wh[i, W_PX] - cx, wh[i, W_PY] - cy))
+        lever = b[B_LEVER]
         steered = b[B_STEER] > 0.5
         dl, dr = delta[d], delta_rate[d]
         set_directions(wh, nw, dl, b[B_WHEELBASE], dirs1)
@@ -422,7 +438,8 @@ def step_robots(
                 # second stage: a = y0 + (1 - gamma) h f(Y1), f(Y1) = (Y1 - y0) / (gamma h)
                 for k in range(3 + nw):
                     a[k] = y0[k] + (1.0 - GAMMA) / GAMMA * (y1[k] - y0[k])
-                y2[:] = y1
+                for k in range(3 + nw):  # first guess: f(Y2) = f(Y1)
+                    y2[k] = a[k] + y1[k] - y0[k]
                 sig2 = solve_stage(b, wh, mu_n, dirs2, target[d], gh, a, y2, tau2, slip, kap)
                 # the local error's estimate: gamma h |f(Y2) - f(Y1)|, velocities in m/s
                 est = 0.0
@@ -462,9 +479,12 @@ def step_robots(
             phi[d, i] = y2[3 + i]
             out_torque[d, i] = tau2[i]
             out_slip[d, i] = slip[i]
-            out_steer[d, i] = wheel_angle(wh[i], dl, b[B_WHEELBASE])
         w = y2[2]
         vel[d, 0], vel[d, 1], vel[d, 2] = y2[0] + w * cy, y2[1] - w * cx, w
+        out_speed[d, 1] = math.hypot(vel[d, 0], vel[d, 1])
+        for j in range(steer_cols.shape[1]):
+            c = steer_cols[d, j]
+            out_steer[d, j] = 0.0 if c < 0 else wheel_angle(wh[c], dl, b[B_WHEELBASE])
         delta[d], delta_rate[d] = dl, dr
         out_twist[d, 0], out_twist[d, 1], out_twist[d, 2] = se2_log(rx, ry, rth, dt)
         out_nsub[d] = taken
