@@ -14,9 +14,12 @@ Each sub-step h is one step of the two-stage L-stable SDIRK method (Alexander's,
 gamma = 1 - 1/sqrt 2): Y1 = y + gamma h f(Y1); y' = Y2 = y + (1 - gamma) h f(Y1) + gamma h
 f(Y2). Each stage is solved by Newton's method; its linear system (body + wheels) is
 symmetric positive definite and each wheel is eliminated in closed form, leaving 3 x 3.
-The pose moves exactly on SE(2) with the stage twists weighted (1 - gamma, gamma). The
-step's start-to-end pose change is handed back as the constant twist that reproduces it
-(the SE(2) logarithm), so the engine's swept collision checks move the body as before.
+A step is one sub-step unless ``max_substep_s`` is shorter; a sub-step is halved (on a
+dyadic grid, see ``substep_count``) where a kink of the friction law or a torque limit is
+crossed, where new targets start a transient and where the error estimate is large. The
+pose moves exactly on SE(2) with the stage twists weighted (1 - gamma, gamma). The step's
+start-to-end pose change is handed back as the constant twist that reproduces it (the SE(2)
+logarithm), so the engine's swept collision checks move the body as before.
 """
 
 from __future__ import annotations
