@@ -206,6 +206,11 @@ class Dynamics:
         self._fill(d, self.robots[d], load)
         self.loads[d] = load
 
+    def set_floor(self, floor: FloorFriction) -> None:
+        """A new floor (friction and its regions) from the next step."""
+        self.floor = floor
+        self._regions = floor.table()
+
     def mass_kg(self) -> np.ndarray:
         return self.body[:, K.B_MASS].copy()
 

@@ -29,6 +29,7 @@ from agvsim.control.api import (
     WheelCommand,
     command_to_array,
 )
+from agvsim.dynamics.spec import FloorFriction
 from agvsim.dynamics.vehicle import Dynamics
 from agvsim.geometry import box_tables
 from agvsim.kinematics import actuation
@@ -438,6 +439,13 @@ class Simulation:
             self.cameras.set_world(self.world)
         self.collider.set_grid(grid)
         self._substep_len = 0.5 * min(grid.resolution_m, float(self._half.min()))
+
+    def set_floor(self, floor: FloorFriction) -> None:
+        """Change the floor's friction of the running simulation (a friction brush): robots
+        with dynamics feel it from the next step."""
+        self.world = dc_replace(self.world, floor=floor)
+        if self.dynamics is not None:
+            self.dynamics.set_floor(floor)
 
     def set_boxes(self, boxes: np.ndarray) -> None:
         """Change the static boxes ``(K, 5)`` of the running simulation (a box dropped on the
