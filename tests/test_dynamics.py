@@ -355,23 +355,36 @@ def ode_case(name: str, max_substep_s: float | None):
 
 @pytest.mark.parametrize("name", list(ODE_CASES))
 def test_matches_solve_ivp(name):
-    """Three seconds of accelerating (with slip), turning and braking: with 0.5 ms sub-steps
-    the kernel's poses stay within 1 mm of scipy's Radau solution of the same equations
-    (the automatic sub-step, chosen for stability, gives 1-2 mm here: the scheme is first
-    order, see the next test)."""
-    poses, ref = ode_case(name, 5e-4)
-    assert np.hypot(*(poses[:, :2] - ref[:, :2]).T).max() < 1e-3
-    assert np.abs(poses[:, 2] - ref[:, 2]).max() < 1e-3
+    """Three seconds of accelerating (with slip), turning and braking, with the default
+    (automatic) sub-steps: the kernel's poses stay within 0.25 mm and 0.25 mrad of scipy's
+    Radau solution of the same equations (measured: 0.016-0.062 mm; the issue asks 1 mm)."""
+    poses, ref = ode_case(name, None)
+    assert np.hypot(*(poses[:, :2] - ref[:, :2]).T).max() < 2.5e-4
+    assert np.abs(poses[:, 2] - ref[:, 2]).max() < 2.5e-4
     assert np.hypot(*ref[-1, :2]) > 0.3  # it went somewhere
 
 
-@pytest.mark.slow
-def test_error_against_solve_ivp_halves_with_the_substep():
-    errs = []
-    for h in (1e-3, 5e-4):
-        poses, ref = ode_case("differential", h)
-        errs.append(np.hypot(*(poses[:, :2] - ref[:, :2]).T).max())
-    assert errs[1] < 0.6 * errs[0]
+def test_substeps_follow_the_transients():
+    """One sub-step a step while nothing changes; new targets start with the shortest
+    sub-step (the controller's time constant / 80) and grow it back, doubling."""
+    rob = robot(mass_kg=60.0)
+    dyn = Dynamics([rob], FloorFriction(0.8), 4, 2)
+    pose, counts = np.zeros((1, 3)), []
+    for k in range(60):
+        targets = np.array([[8.0, 9.0, 0, 0]]) if k < 30 else np.array([[4.0, 4.0, 0, 0]])
+        out = dyn.step(pose, targets, np.zeros(1), np.zeros(1, bool), 0.02, k * 0.02)
+        pose = integrate_se2(pose, out.twist, 0.02)
+        counts.append(int(out.substeps[0]))
+    assert counts[0] >= 6 and counts[30] >= 6  # 1, 1, 2, 4, 8, 16 of 32 at least
+    assert counts[25:30] == [1] * 5 and counts[55:] == [1] * 5
+
+
+def test_capped_substep_agrees_with_the_default():
+    """``max_substep_s`` only makes the steps shorter: 1 ms sub-steps land within 0.1 mm of
+    the default's poses."""
+    a, _ = ode_case("mecanum", None)
+    b, _ = ode_case("mecanum", 1e-3)
+    assert np.hypot(*(a[:, :2] - b[:, :2]).T).max() < 1e-4
 
 
 # ------------------------------------------------------------------ limits and invariants

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from agvsim.app.friction_brush import paint_friction
 from agvsim.app.mask import Field, MaskError, fields_in_error, mask_fields, robot_from_mask
 from agvsim.app.session import SPEEDS, EditError, Session
 from agvsim.kinematics import MODELS
@@ -452,6 +453,14 @@ class Panel:
             hint="click the floor (best in the top plan view) to move the robot picked in the "
             "Robot tab there, at the nearest free spot",
         )
+        self.brush_mu = gui.add_number(
+            "paint friction mu",
+            initial_value=0.0,
+            min=0.0,
+            max=5.0,
+            step=0.05,
+            hint="above 0: a click (edit maze on) paints the floor cell with this friction",
+        )
         self.world_msg = gui.add_markdown("")
         self.maze_rows = gui.add_number(
             "rooms north-south", initial_value=5, min=1, max=200, step=1
@@ -501,6 +510,10 @@ class Panel:
         cell = pick_cell(self.session, np.asarray(origin), np.asarray(direction))
         if cell is None:
             self.world_msg.content = _error_md("that click is not on the map")
+            return
+        if self.brush_mu.value > 0:  # the friction brush (agvsim.app.friction_brush)
+            region = paint_friction(self.session, *cell, float(self.brush_mu.value))
+            self.world_msg.content = f"cell {cell} now has friction {region.mu:g}"
             return
         wall = self.session.toggle_cell(*cell)
         self.world_msg.content = f"cell {cell} is now {'a wall' if wall else 'free'}"

@@ -1,17 +1,25 @@
 """The numba kernel of planar dynamics: one call advances every dynamic robot by one step.
 
-Per robot and sub-step h (docs/dynamics.md has the derivation):
+Per robot the state is y = (v_c, omega, phi_1..phi_W): the centre of mass velocity and yaw
+rate (robot frame) and the driven wheels' spin. Its equations (docs/dynamics.md):
 
-    steering   delta_rate -> clip((target - delta) / max(tau_s, h), +-rate), acceleration-limited
-    wheel i    contact velocity u = v_P + omega x p_i; slip s (wheel frame, or along the roller
-               axis a for Mecanum/omni wheels); friction F = -mu N q(|s|) s (friction circle);
-               J phi' = tau_motor(phi) - r F . e  by backward Euler in phi (body velocity held)
-    body       m (v_c' + omega x v_c) = sum F,   I_c omega' = sum (p_i - c) x F_i  (explicit,
-               with the wheels' new speeds: Gauss-Seidel); the pose moves exactly on SE(2)
-               with the mean of the sub-step's old and new twist
+    wheel i    contact velocity u = v_c + omega x (p_i - c); slip s (wheel frame, or along
+               the roller axis a for Mecanum/omni wheels); friction F = -mu N q(|s|) s
+               (friction circle); J phi' = tau_motor(phi) - r F . e
+    body       m (v_c' + omega x v_c) = sum F,   I_c omega' = sum (p_i - c) x F_i
+    steering   a first-order servo, rate and acceleration limited (integrated apart: it
+               does not depend on the body)
 
-The step's start-to-end pose change is handed back as the constant twist that reproduces it
-(the SE(2) logarithm), so the engine's swept collision checks move the body as before.
+Each sub-step h is one step of the two-stage L-stable SDIRK method (Alexander's, order 2,
+gamma = 1 - 1/sqrt 2): Y1 = y + gamma h f(Y1); y' = Y2 = y + (1 - gamma) h f(Y1) + gamma h
+f(Y2). Each stage is solved by Newton's method; its linear system (body + wheels) is
+symmetric positive definite and each wheel is eliminated in closed form, leaving 3 x 3.
+A step is one sub-step unless ``max_substep_s`` is shorter; a sub-step is halved (on a
+dyadic grid, see ``substep_count``) where a kink of the friction law or a torque limit is
+crossed, where new targets start a transient and where the error estimate is large. The
+pose moves exactly on SE(2) with the stage twists weighted (1 - gamma, gamma). The step's
+start-to-end pose change is handed back as the constant twist that reproduces it (the SE(2)
+logarithm), so the engine's swept collision checks move the body as before.
 """
 
 from __future__ import annotations
@@ -24,15 +32,25 @@ from numba import njit, prange
 # columns of the per-robot table ``body`` (D, NB)
 B_MASS, B_INERTIA, B_CX, B_CY, B_RADIUS, B_WHEELBASE, B_GAIN, B_GEAR = 0, 1, 2, 3, 4, 5, 6, 7
 B_TMAX, B_TSTALL, B_W0, B_VSLIP, B_MAXSUB, B_DMAX, B_RATE, B_SACC = 8, 9, 10, 11, 12, 13, 14, 15
-B_STAU, B_TYRE, B_STEER, B_NW = 16, 17, 18, 19
-NB = 20
+B_STAU, B_TYRE, B_STEER, B_NW, B_MTAU, B_LEVER = 16, 17, 18, 19, 20, 21
+NB = 22
 # columns of the per-wheel table ``wheel`` (D, W, NWC)
 W_PX, W_PY, W_BETA, W_GAMMA, W_KIND, W_DRIVEN, W_STEER, W_NORMAL, W_J = 0, 1, 2, 3, 4, 5, 6, 7, 8
-NWC = 9
+W_DIRS = 9  # 9-12: cos, sin of the rolling direction and of the force axis, unsteered
+NWC = 13
 KIND_2D = 0  # a standard wheel: friction in both directions (friction circle)
 KIND_1D = 1  # force only along the axis at angle gamma to the rolling direction (rollers)
 STEER_NONE, STEER_BICYCLE, STEER_ACKERMANN = 0, 1, 2
 MAX_SUBSTEPS = 100_000
+GAMMA = 1.0 - 1.0 / math.sqrt(2.0)  # SDIRK2: L-stable, second order
+REFINE_PER_TIME_CONSTANT = 0.0125  # the shortest sub-step, in controller time constants
+REFINE_MAX_S = 1e-3  # the shortest sub-step is at most this long
+MAX_LEVELS = 12  # halvings of a sub-step at most
+ERROR_TOL_M_S = 1e-3  # a sub-step is halved where its error estimate exceeds this
+SERVO_STEP_S = 1e-3  # the steering servo's own step
+NEWTON_ITERATIONS = 30  # at most, per stage (two or three when nothing saturates)
+NEWTON_TOL_M_S = 1e-5  # converged when no velocity (or r phi) moved by more: the next
+# correction, quadratically smaller, is ~1e-9 m/s
 
 
 @njit(cache=True, error_model="numpy")
@@ -83,99 +101,21 @@ def motor_torque(
 
 
 @njit(cache=True, error_model="numpy")
-def _wheel_torques(
-    p: float,
-    v_main: float,
-    s_side: float,
-    c: float,
-    r: float,
-    mu_n: float,
-    b: np.ndarray,
-    target: float,
-) -> tuple[float, float, float]:
-    """Net torque g on a driven wheel spinning at p (motor + contact), dg/dp and the motor's
-    torque. The contact slips by s_main = v_main - r c p along its force axis (c = 1 for a
-    standard wheel, cos gamma for rollers) and s_side across it."""
-    tau, dtau = motor_torque(b[B_GAIN], target, p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0])
-    vslip, tyre = b[B_VSLIP], b[B_TYRE] > 0.5
-    sm = v_main - r * c * p
-    slip = math.hypot(sm, s_side)
-    q = _q(slip, vslip, tyre)
-    dfds = q + (_dq(slip, vslip, tyre) * sm * sm / slip if slip > 0.0 else 0.0)
-    return tau + r * c * mu_n * q * sm, dtau - r * r * c * c * mu_n * dfds, tau
-
-
-@njit(cache=True, error_model="numpy")
-def solve_wheel(
-    p: float,
-    h: float,
-    jw: float,
-    v_main: float,
-    s_side: float,
-    c: float,
-    r: float,
-    mu_n: float,
-    b: np.ndarray,
-    target: float,
-) -> tuple[float, float]:
-    """Backward Euler for one driven wheel's spin, J (p_new - p) = h g(p_new), with the body
-    velocity held: g decreases in p, so the root is unique; safeguarded Newton finds it
-    (stiff contacts and high controller gains stay stable, and a wheel that the brake
-    overpowers locks at once). Returns the new spin and the motor torque."""
-    g_max = b[B_GEAR] * max(b[B_TMAX], b[B_TSTALL]) + r * abs(c) * mu_n
-    lo, hi = p - h * g_max / jw - 1e-12, p + h * g_max / jw + 1e-12
-    r_lo, r_hi = -1.0, 1.0  # residual signs at the bracket ends; values once known
-    known_lo, known_hi = False, False
-    x, tau = p, 0.0
-    side = 0  # which end the last step moved: +1 hi, -1 lo (Illinois rule)
-    for _ in range(60):
-        g, dg, tau = _wheel_torques(x, v_main, s_side, c, r, mu_n, b, target)
-        res = jw * (x - p) - h * g
-        if res == 0.0:
-            return x, tau
-        if res > 0.0:
-            hi, r_hi, known_hi = x, res, True
-            if side == 1:
-                r_lo *= 0.5
-            side = 1
-        else:
-            lo, r_lo, known_lo = x, res, True
-            if side == -1:
-                r_hi *= 0.5
-            side = -1
-        step = res / (jw - h * dg)
-        if abs(step) <= 1e-13 * (1.0 + abs(x)):
-            return x - step, tau
-        xn = x - step
-        if not lo < xn < hi:  # Newton left the bracket (a kink): false position or bisection
-            xn = lo - r_lo * (hi - lo) / (r_hi - r_lo) if known_lo and known_hi else 0.5 * (lo + hi)
-            if not lo < xn < hi:
-                xn = 0.5 * (lo + hi)
-        if hi - lo <= 1e-13 * (1.0 + abs(x)):
-            return xn, tau
-        x = xn
-    return x, tau
-
-
-@njit(cache=True, error_model="numpy")
-def substep_count(body: np.ndarray, wheel: np.ndarray, mu_n: np.ndarray, dt: float) -> int:
-    """Sub-steps for stability of the explicit body update: h (sum k_i / m + sum k_i
-    |p_i - c|^2 / I) <= 1, a bound on h times the fastest contact rate, with the contact
-    stiffness k_i = mu N_i / slip_speed (the wheels' spin is implicit and needs no bound);
-    and h <= max_substep_s."""
-    nw = int(body[B_NW])
-    csum, cyaw = 0.0, 0.0
-    for i in range(nw):
-        k = mu_n[i] / body[B_VSLIP]
-        dx, dy = wheel[i, W_PX] - body[B_CX], wheel[i, W_PY] - body[B_CY]
-        csum += k
-        cyaw += k * (dx * dx + dy * dy)
-    rate = csum / body[B_MASS] + cyaw / body[B_INERTIA]
-    h = body[B_MAXSUB]
-    if rate > 0.0:
-        h = min(h, 1.0 / rate)
-    n = int(math.ceil(dt / h - 1e-9))
-    return min(max(n, 1), MAX_SUBSTEPS)
+def substep_count(body: np.ndarray, dt: float) -> tuple[int, int]:
+    """Sub-steps of a step: ``n`` of at most max_substep_s (one by default: the method is
+    L-stable, stiff contacts need no bound), each halved up to ``levels`` times where a wheel
+    crosses the friction law's kink or a motor's torque limit, where targets change and where
+    the error estimate is large, down to REFINE_PER_TIME_CONSTANT x the shorter of the motor's
+    and the steering servo's time constants, or REFINE_MAX_S if shorter."""
+    tau = body[B_MTAU]
+    if body[B_STEER] > 0.5:
+        tau = min(tau, body[B_STAU])
+    n = min(max(int(math.ceil(dt / body[B_MAXSUB] - 1e-9)), 1), MAX_SUBSTEPS)
+    levels = 0
+    h_min = min(REFINE_PER_TIME_CONSTANT * tau, REFINE_MAX_S)
+    while levels < MAX_LEVELS and dt / n / (1 << levels) > h_min:
+        levels += 1
+    return n, levels
 
 
 @njit(cache=True, error_model="numpy")
@@ -188,6 +128,190 @@ def wheel_angle(wheel: np.ndarray, delta: float, wheelbase: float) -> float:
         k = math.tan(delta) / wheelbase
         return wheel[W_BETA] + math.atan(k * wheelbase / (1.0 - k * wheel[W_PY]))
     return wheel[W_BETA]
+
+
+@njit(cache=True, error_model="numpy")
+def set_directions(wheel: np.ndarray, nw: int, delta: float, wheelbase: float, dirs: np.ndarray):
+    """dirs (W, 4): cos, sin of each wheel's rolling direction and of its force axis."""
+    for i in range(nw):
+        if int(wheel[i, W_STEER]) == STEER_NONE:
+            for k in range(4):
+                dirs[i, k] = wheel[i, W_DIRS + k]
+            continue
+        ang = wheel_angle(wheel[i], delta, wheelbase)
+        gam = wheel[i, W_GAMMA]
+        dirs[i, 0], dirs[i, 1] = math.cos(ang), math.sin(ang)
+        dirs[i, 2], dirs[i, 3] = math.cos(ang + gam), math.sin(ang + gam)
+
+
+@njit(cache=True, error_model="numpy")
+def servo(
+    b: np.ndarray, delta: float, rate: float, target: float, dur: float
+) -> tuple[float, float]:
+    """The steering servo over ``dur`` seconds: first order (exact between its own steps of
+    at most SERVO_STEP_S), rate limited by the model and acceleration limited by the
+    actuator's torque, the angle by the model's limit. Returns (angle, rate)."""
+    if dur <= 0.0:
+        return delta, rate
+    n = int(math.ceil(dur / SERVO_STEP_S - 1e-9))
+    hs = dur / n
+    gain = -math.expm1(-hs / b[B_STAU]) / hs  # the exact first-order step, as a rate
+    acc = b[B_SACC] * hs
+    for _ in range(n):
+        want = min(max((target - delta) * gain, -b[B_RATE]), b[B_RATE])
+        rate += min(max(want - rate, -acc), acc)
+        delta += hs * rate
+        if abs(delta) > b[B_DMAX]:
+            delta = math.copysign(b[B_DMAX], delta)
+            rate = 0.0
+    return delta, rate
+
+
+@njit(cache=True, error_model="numpy")
+def solve_stage(
+    b: np.ndarray,
+    wheel: np.ndarray,  # (W, NWC) this robot's wheels
+    mu_n: np.ndarray,  # (W,) mu N under each wheel
+    dirs: np.ndarray,  # (W, 4) directions at the stage's time
+    target: np.ndarray,  # (W,) wheel-speed targets
+    gh: float,  # gamma h
+    a: np.ndarray,  # (3 + W,) the stage's explicit part: y = a + gamma h f(y)
+    y: np.ndarray,  # (3 + W,) in: first guess; out: the stage value
+    tau: np.ndarray,  # (W,) out: motor torque at y
+    slip: np.ndarray,  # (W,) out: slip speed at y; phi of free wheels in y
+    kap: np.ndarray,  # (W, 5) scratch
+) -> int:
+    """Newton's method for one implicit stage, y = a + gh f(y), y = (v_c, omega, phi).
+    Returns the regime of the solution: per wheel, whether it slides (past the Coulomb
+    law's kink) and whether its motor is at a torque limit (two bits a wheel).
+
+    Each iteration linearises the contact forces F(s) (dF/ds = D, symmetric negative
+    semi-definite: friction is the gradient of a convex function of the slip) and the motor
+    torque; the system [M - gh sum H, -gh k_i; -gh k_i^T, J_i - gh g_i'] is symmetric
+    positive definite; each wheel's row is solved for its spin and put into the body's 3 x 3
+    (the Schur complement). The yaw-rate coupling omega x v_c stays out of the matrix (it
+    is slow: the iteration still contracts at once)."""
+    nw = int(b[B_NW])
+    m, inertia, cx, cy = b[B_MASS], b[B_INERTIA], b[B_CX], b[B_CY]
+    r, vslip, tyre = b[B_RADIUS], b[B_VSLIP], b[B_TYRE] > 0.5
+    sig = 0
+    for _ in range(NEWTON_ITERATIONS):
+        sig = 0
+        vx, vy, w = y[0], y[1], y[2]
+        # the body's rows, times the mass: M (y - a) - gh (Q + M gyro)
+        r0 = m * (vx - a[0]) - gh * m * w * vy
+        r1 = m * (vy - a[1]) + gh * m * w * vx
+        r2 = inertia * (w - a[2])
+        s00, s01, s02, s11, s12, s22 = m, 0.0, 0.0, m, 0.0, inertia
+        for i in range(nw):
+            wi = wheel[i]
+            dx, dy = wi[W_PX] - cx, wi[W_PY] - cy
+            ux, uy = vx - w * dy, vy + w * dx  # contact point velocity
+            ca, sa = dirs[i, 0], dirs[i, 1]
+            driven = wi[W_DRIVEN] > 0.5
+            p = y[3 + i]
+            if int(wi[W_KIND]) == KIND_2D and driven:
+                # rows of u.e and u.n in (v_c, omega)
+                gm0, gm1, gm2 = ca, sa, -dy * ca + dx * sa
+                gs0, gs1, gs2 = -sa, ca, dy * sa + dx * ca
+                sm = ux * ca + uy * sa - r * p
+                st = -ux * sa + uy * ca
+                sn = math.hypot(sm, st)
+                q = _q(sn, vslip, tyre)
+                dqs = _dq(sn, vslip, tyre) / sn if sn > 0.0 else 0.0
+                fm, ft = -mu_n[i] * q * sm, -mu_n[i] * q * st
+                d00 = -mu_n[i] * (q + dqs * sm * sm)
+                d01 = -mu_n[i] * dqs * sm * st
+                d11 = -mu_n[i] * (q + dqs * st * st)
+                q0, q1, q2 = gm0 * fm + gs0 * ft, gm1 * fm + gs1 * ft, gm2 * fm + gs2 * ft
+                # H = G^T D G, the generalised force's derivative in (v_c, omega)
+                t0, t1, t2 = d00 * gm0 + d01 * gs0, d00 * gm1 + d01 * gs1, d00 * gm2 + d01 * gs2
+                u0, u1, u2 = d01 * gm0 + d11 * gs0, d01 * gm1 + d11 * gs1, d01 * gm2 + d11 * gs2
+                h00, h01, h02 = gm0 * t0 + gs0 * u0, gm0 * t1 + gs0 * u1, gm0 * t2 + gs0 * u2
+                h11, h12, h22 = gm1 * t1 + gs1 * u1, gm1 * t2 + gs1 * u2, gm2 * t2 + gs2 * u2
+                k0, k1, k2 = -r * t0, -r * t1, -r * t2  # dQ/dphi = (dg/dv)^T
+                rc, dmain, fmain = r, d00, fm
+            else:
+                if int(wi[W_KIND]) == KIND_2D:  # a free standard wheel: side force only
+                    ax, ay = -sa, ca
+                else:
+                    ax, ay = dirs[i, 2], dirs[i, 3]
+                rc = r * (ca * ax + sa * ay) if driven else 0.0
+                g0, g1, g2 = ax, ay, -dy * ax + dx * ay
+                sm = ux * ax + uy * ay - rc * p
+                sn = abs(sm)
+                q = _q(sn, vslip, tyre)
+                fm = -mu_n[i] * q * sm
+                dmain = -mu_n[i] * (q + _dq(sn, vslip, tyre) * sn)
+                q0, q1, q2 = g0 * fm, g1 * fm, g2 * fm
+                h00, h01, h02 = dmain * g0 * g0, dmain * g0 * g1, dmain * g0 * g2
+                h11, h12, h22 = dmain * g1 * g1, dmain * g1 * g2, dmain * g2 * g2
+                k0, k1, k2 = -rc * dmain * g0, -rc * dmain * g1, -rc * dmain * g2
+                fmain = fm
+                if not driven:  # it rolls freely: its spin follows the contact
+                    y[3 + i] = (ux * ca + uy * sa) / r
+            slip[i] = sn
+            if not tyre and sn >= vslip:
+                sig |= 1 << (2 * i)
+            r0 -= gh * q0
+            r1 -= gh * q1
+            r2 -= gh * q2
+            s00 -= gh * h00
+            s01 -= gh * h01
+            s02 -= gh * h02
+            s11 -= gh * h11
+            s12 -= gh * h12
+            s22 -= gh * h22
+            if driven:
+                tq, dtq = motor_torque(
+                    b[B_GAIN], target[i], p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0]
+                )
+                tau[i] = tq
+                if dtq == 0.0:
+                    sig |= 1 << (2 * i + 1)
+                jw = wi[W_J]
+                rp = jw * (p - a[3 + i]) - gh * (tq - rc * fmain)
+                dinv = 1.0 / (jw - gh * (dtq + rc * rc * dmain))
+                # eliminate the spin: dphi = (-rp + gh k . dv) / d
+                c = gh * gh * dinv
+                s00 -= c * k0 * k0
+                s01 -= c * k0 * k1
+                s02 -= c * k0 * k2
+                s11 -= c * k1 * k1
+                s12 -= c * k1 * k2
+                s22 -= c * k2 * k2
+                e = gh * dinv * rp
+                r0 += e * k0
+                r1 += e * k1
+                r2 += e * k2
+                kap[i, 0], kap[i, 1], kap[i, 2], kap[i, 3], kap[i, 4] = k0, k1, k2, dinv, rp
+            else:
+                tau[i] = 0.0
+                kap[i, 3] = 0.0
+        # solve S dv = -r (S symmetric positive definite) by its cofactors
+        c00 = s11 * s22 - s12 * s12
+        c01 = s02 * s12 - s01 * s22
+        c02 = s01 * s12 - s02 * s11
+        det = s00 * c00 + s01 * c01 + s02 * c02
+        c11 = s00 * s22 - s02 * s02
+        c12 = s01 * s02 - s00 * s12
+        c22 = s00 * s11 - s01 * s01
+        dv0 = -(c00 * r0 + c01 * r1 + c02 * r2) / det
+        dv1 = -(c01 * r0 + c11 * r1 + c12 * r2) / det
+        dv2 = -(c02 * r0 + c12 * r1 + c22 * r2) / det
+        y[0] += dv0
+        y[1] += dv1
+        y[2] += dv2
+        big = max(abs(dv0), abs(dv1), abs(dv2) * b[B_RADIUS])
+        for i in range(nw):
+            if kap[i, 3] != 0.0:
+                dphi = gh * (kap[i, 0] * dv0 + kap[i, 1] * dv1 + kap[i, 2] * dv2) - kap[i, 4]
+                dphi *= kap[i, 3]
+                y[3 + i] += dphi
+                big = max(big, abs(dphi) * b[B_RADIUS])
+        if big <= NEWTON_TOL_M_S:
+            break
+    return sig
 
 
 @njit(cache=True, error_model="numpy")
@@ -219,147 +343,151 @@ def step_robots(
     target: np.ndarray,  # (D, W) wheel-speed targets, rad/s (driven wheels)
     delta_target: np.ndarray,  # (D,) steering target, rad
     freeze: np.ndarray,  # (D,) bool: bumped or stopped, velocities to zero first
+    last_target: np.ndarray,  # (D, W) in/out: the previous step's targets
     vel: np.ndarray,  # (D, 3) in/out: instantaneous twist at P
     phi: np.ndarray,  # (D, W) in/out: wheel spin speeds, rad/s
     delta: np.ndarray,  # (D,) in/out: steering angle
     delta_rate: np.ndarray,  # (D,) in/out
     out_twist: np.ndarray,  # (D, 3) the step's equivalent constant twist
     out_angle: np.ndarray,  # (D, W) wheel rotation over the step, rad
-    out_steer: np.ndarray,  # (D, W) each wheel's rolling direction at the end, rad
+    steer_cols: np.ndarray,  # (D, S) the steered wheels' columns (model order), -1: none
+    out_steer: np.ndarray,  # (D, S) the steered wheels' rolling directions at the end, rad
     out_torque: np.ndarray,  # (D, W) wheel torque at the end, N m
     out_slip: np.ndarray,  # (D, W) slip speed |s| at the end, m/s
     out_work: np.ndarray,  # (D, W) motor work over the step, J
     out_nsub: np.ndarray,  # (D,) sub-steps taken
+    out_speed: np.ndarray,  # (D, 2) speed of P at the start and at the end, m/s
+    out_braking: np.ndarray,  # (D,) bool: every driven wheel's target is zero
 ) -> None:
-    n_rob = poses.shape[0]
+    n_rob, n_w = poses.shape[0], wheel.shape[1]
     n_reg = regions.shape[0]
-    mu_all = np.zeros((n_rob, wheel.shape[1]))
-    dirs_all = np.zeros((n_rob, wheel.shape[1], 4))
+    mu_all = np.zeros((n_rob, n_w))  # scratch, one row per robot
+    dirs_all = np.zeros((n_rob, 2, n_w, 4))
+    ys_all = np.zeros((n_rob, 4, 3 + n_w))
+    ws_all = np.zeros((n_rob, 3, n_w))
+    kap_all = np.zeros((n_rob, n_w, 5))
     for d in prange(n_rob):  # robots are independent: one thread each, same result
-        mu_n = mu_all[d]
-        dirs = dirs_all[d]  # cos, sin of each rolling direction and force axis
         b = body[d]
+        wh = wheel[d]
         nw = int(b[B_NW])
+        mu_n = mu_all[d]
+        dirs1, dirs2 = dirs_all[d, 0], dirs_all[d, 1]  # at the first stage and at the end
+        y0, y1, y2, a = ys_all[d, 0], ys_all[d, 1], ys_all[d, 2], ys_all[d, 3]
+        tau1, tau2, slip = ws_all[d, 0], ws_all[d, 1], ws_all[d, 2]
+        kap = kap_all[d]
+        out_speed[d, 0] = math.hypot(vel[d, 0], vel[d, 1])
+        braking = True
+        for i in range(nw):
+            if wh[i, W_DRIVEN] > 0.5 and abs(target[d, i]) > 1e-12:
+                braking = False
+        out_braking[d] = braking
         if freeze[d]:
             vel[d, :] = 0.0
             phi[d, :] = 0.0
             delta_rate[d] = 0.0
-        x0, y0, th0 = poses[d, 0], poses[d, 1], poses[d, 2]
+        x0, y0p, th0 = poses[d, 0], poses[d, 1], poses[d, 2]
         c0, s0 = math.cos(th0), math.sin(th0)
         for i in range(nw):
-            wx = x0 + c0 * wheel[d, i, W_PX] - s0 * wheel[d, i, W_PY]
-            wy = y0 + s0 * wheel[d, i, W_PX] + c0 * wheel[d, i, W_PY]
+            wx = x0 + c0 * wh[i, W_PX] - s0 * wh[i, W_PY]
+            wy = y0p + s0 * wh[i, W_PX] + c0 * wh[i, W_PY]
             mu = floor_mu
             for k in range(n_reg):
                 if regions[k, 0] <= wx < regions[k, 2] and regions[k, 1] <= wy < regions[k, 3]:
                     mu = regions[k, 4]
-            mu_n[i] = mu * wheel[d, i, W_NORMAL]
-        n_sub = substep_count(b, wheel[d], mu_n, dt)
-        h = dt / n_sub
-        m, inertia, cx, cy = b[B_MASS], b[B_INERTIA], b[B_CX], b[B_CY]
-        r, vslip, tyre = b[B_RADIUS], b[B_VSLIP], b[B_TYRE] > 0.5
-        vx, vy, w = vel[d, 0], vel[d, 1], vel[d, 2]
+            mu_n[i] = mu * wh[i, W_NORMAL]
+        n_sub, levels = substep_count(b, dt)
+        cx, cy = b[B_CX], b[B_CY]
+        lever = b[B_LEVER]
+        steered = b[B_STEER] > 0.5
         dl, dr = delta[d], delta_rate[d]
-        rx, ry, rth = 0.0, 0.0, 0.0
+        set_directions(wh, nw, dl, b[B_WHEELBASE], dirs1)
+        set_directions(wh, nw, dl, b[B_WHEELBASE], dirs2)
+        # the state at the centre of mass
+        y2[0], y2[1], y2[2] = vel[d, 0] - vel[d, 2] * cy, vel[d, 1] + vel[d, 2] * cx, vel[d, 2]
         for i in range(nw):
+            y2[3 + i] = phi[d, i]
+        for i in range(n_w):
             out_angle[d, i] = 0.0
             out_work[d, i] = 0.0
-        steered = False
-        for i in range(nw):  # fixed wheels: directions once a step
-            wi = wheel[d, i]
-            steered = steered or int(wi[W_STEER]) != STEER_NONE
-            ang = wheel_angle(wi, dl, b[B_WHEELBASE])
-            dirs[i, 0], dirs[i, 1] = math.cos(ang), math.sin(ang)
-            dirs[i, 2], dirs[i, 3] = math.cos(ang + wi[W_GAMMA]), math.sin(ang + wi[W_GAMMA])
-            out_steer[d, i] = ang
+            out_torque[d, i] = 0.0
+            out_slip[d, i] = 0.0
+        rx, ry, rth = 0.0, 0.0, 0.0
         cr, sr = 1.0, 0.0  # rotation of the body since the step start
-        for _ in range(n_sub):
-            if b[B_STEER] > 0.5:  # first-order servo, rate and acceleration limited
-                rate = min(max((delta_target[d] - dl) / max(b[B_STAU], h), -b[B_RATE]), b[B_RATE])
-                acc = b[B_SACC] * h
-                dr += min(max(rate - dr, -acc), acc)
-                dl += h * dr
-                if abs(dl) > b[B_DMAX]:
-                    dl = math.copysign(b[B_DMAX], dl)
-                    dr = 0.0
-            fx, fy, mz = 0.0, 0.0, 0.0
-            for i in range(nw):
-                wi = wheel[d, i]
-                px, py = wi[W_PX], wi[W_PY]
-                if steered and int(wi[W_STEER]) != STEER_NONE:
-                    ang = wheel_angle(wi, dl, b[B_WHEELBASE])
-                    dirs[i, 0], dirs[i, 1] = math.cos(ang), math.sin(ang)
-                    dirs[i, 2], dirs[i, 3] = (
-                        math.cos(ang + wi[W_GAMMA]),
-                        math.sin(ang + wi[W_GAMMA]),
-                    )
-                    out_steer[d, i] = ang
-                ca, sa = dirs[i, 0], dirs[i, 1]
-                ux, uy = vx - w * py, vy + w * px  # contact point velocity, robot frame
-                driven = wi[W_DRIVEN] > 0.5
-                p = phi[d, i]
-                tau = 0.0
-                if int(wi[W_KIND]) == KIND_2D:
-                    vl = ux * ca + uy * sa
-                    vt = -ux * sa + uy * ca
-                    if driven:
-                        p, tau = solve_wheel(
-                            p, h, wi[W_J], vl, vt, 1.0, r, mu_n[i], b, target[d, i]
-                        )
-                        sl = vl - r * p
-                    else:  # free rolling
-                        p = vl / r
-                        sl = 0.0
-                    sm = math.hypot(sl, vt)
-                    k = mu_n[i] * _q(sm, vslip, tyre)
-                    fl, ft = -k * sl, -k * vt
-                    fxi, fyi = fl * ca - ft * sa, fl * sa + ft * ca
-                else:
-                    ax, ay = dirs[i, 2], dirs[i, 3]
-                    ea = ca * ax + sa * ay  # cos gamma
-                    su = ux * ax + uy * ay
-                    if driven:
-                        p, tau = solve_wheel(
-                            p, h, wi[W_J], su, 0.0, ea, r, mu_n[i], b, target[d, i]
-                        )
-                        s = su - r * p * ea
-                    else:  # free rolling along its rolling direction
-                        p = (ux * ca + uy * sa) / r
-                        s = su
-                    sm = abs(s)
-                    f = mu_n[i] * _q(sm, vslip, tyre) * s
-                    fxi, fyi = -f * ax, -f * ay
-                phi[d, i] = p
-                fx += fxi
-                fy += fyi
-                mz += (px - cx) * fyi - (py - cy) * fxi
-                out_angle[d, i] += p * h
-                out_work[d, i] += tau * p * h
-                out_torque[d, i] = tau
-                out_slip[d, i] = sm
-            # the body: the centre-of-mass velocity keeps its world direction (it turns by
-            # -a in the body frame as the body turns by a = mean omega h), plus the forces
-            w0 = w
-            w += h * mz / inertia
-            a = 0.5 * (w0 + w) * h
-            sin_a, cos_a = math.sin(a), math.cos(a)
-            vcx, vcy = vx - w0 * cy, vy + w0 * cx
-            vcx, vcy = (
-                cos_a * vcx + sin_a * vcy + h * fx / m,
-                -sin_a * vcx + cos_a * vcy + h * fy / m,
-            )
-            vx0, vy0 = vx, vy
-            vx, vy = vcx + w * cy, vcy - w * cx
-            # the pose moves exactly (SE(2)) with the mean of the old and new twist
-            mx, my = 0.5 * (vx0 + vx) * h, 0.5 * (vy0 + vy) * h
-            sinc = 1.0 - a * a / 6.0 if abs(a) < 1e-6 else sin_a / a
-            cosc = sinc * sin_a / (1.0 + cos_a)  # (1 - cos a) / a without cancellation
-            dx, dy = mx * sinc - my * cosc, mx * cosc + my * sinc
-            rx += cr * dx - sr * dy
-            ry += sr * dx + cr * dy
-            cr, sr = cr * cos_a - sr * sin_a, sr * cos_a + cr * sin_a
-            rth += a
-        vel[d, 0], vel[d, 1], vel[d, 2] = vx, vy, w
+        sig0 = -1  # the regime at the sub-step's start (unknown at first)
+        taken = 0
+        ticks = 1 << levels  # a base sub-step in the finest sub-steps
+        # new targets (the rim speed by more than ERROR_TOL_M_S) start a transient that the
+        # error estimate misses (the contacts settle in milliseconds): the step
+        # begins with the shortest sub-step and doubles it on the dyadic grid from there
+        jump = freeze[d]
+        for i in range(nw):
+            jump = jump or b[B_RADIUS] * abs(target[d, i] - last_target[d, i]) > ERROR_TOL_M_S
+            last_target[d, i] = target[d, i]
+        for base in range(n_sub):
+            level, pos = (levels if jump and base == 0 else 0), 0
+            while pos < ticks:
+                h = dt / n_sub / (1 << level)
+                gh = GAMMA * h
+                y0[:] = y2
+                dl0, dr0 = dl, dr
+                if steered:  # the servo to the first stage's time, then to the end
+                    dl, dr = servo(b, dl, dr, delta_target[d], gh)
+                    set_directions(wh, nw, dl, b[B_WHEELBASE], dirs1)
+                    dl, dr = servo(b, dl, dr, delta_target[d], h - gh)
+                    set_directions(wh, nw, dl, b[B_WHEELBASE], dirs2)
+                a[:] = y0
+                y1[:] = y0
+                sig1 = solve_stage(b, wh, mu_n, dirs1, target[d], gh, a, y1, tau1, slip, kap)
+                # second stage: a = y0 + (1 - gamma) h f(Y1), f(Y1) = (Y1 - y0) / (gamma h)
+                for k in range(3 + nw):
+                    a[k] = y0[k] + (1.0 - GAMMA) / GAMMA * (y1[k] - y0[k])
+                for k in range(3 + nw):  # first guess: f(Y2) = f(Y1)
+                    y2[k] = a[k] + y1[k] - y0[k]
+                sig2 = solve_stage(b, wh, mu_n, dirs2, target[d], gh, a, y2, tau2, slip, kap)
+                # the local error's estimate: gamma h |f(Y2) - f(Y1)|, velocities in m/s
+                est = 0.0
+                for k in range(3 + nw):
+                    e = abs(y2[k] - a[k] - (y1[k] - y0[k]))
+                    est = max(est, e * (1.0 if k < 2 else (lever if k == 2 else b[B_RADIUS])))
+                kink = sig1 != sig2 or (sig0 >= 0 and sig0 != sig1)
+                if level < levels and (kink or est > ERROR_TOL_M_S):
+                    # a kink of the friction law or a torque limit inside: halve the step
+                    y2[:] = y0
+                    dl, dr = dl0, dr0
+                    level += 1
+                    continue
+                sig0 = sig2
+                taken += 1
+                pos += 1 << (levels - level)
+                while level > 0 and pos % (1 << (levels - level + 1)) == 0:
+                    level -= 1  # back to longer steps on their grid
+                # the pose: exactly on SE(2) with the stages' twists at P, weighted like f
+                vx = (1.0 - GAMMA) * (y1[0] + y1[2] * cy) + GAMMA * (y2[0] + y2[2] * cy)
+                vy = (1.0 - GAMMA) * (y1[1] - y1[2] * cx) + GAMMA * (y2[1] - y2[2] * cx)
+                rot = ((1.0 - GAMMA) * y1[2] + GAMMA * y2[2]) * h
+                mx, my = vx * h, vy * h
+                sin_a, cos_a = math.sin(rot), math.cos(rot)
+                sinc = 1.0 - rot * rot / 6.0 if abs(rot) < 1e-6 else sin_a / rot
+                cosc = sinc * sin_a / (1.0 + cos_a)  # (1 - cos a) / a without cancellation
+                dx, dy = mx * sinc - my * cosc, mx * cosc + my * sinc
+                rx += cr * dx - sr * dy
+                ry += sr * dx + cr * dy
+                cr, sr = cr * cos_a - sr * sin_a, sr * cos_a + cr * sin_a
+                rth += rot
+                for i in range(nw):
+                    p1, p2 = y1[3 + i], y2[3 + i]
+                    out_angle[d, i] += h * ((1.0 - GAMMA) * p1 + GAMMA * p2)
+                    out_work[d, i] += h * ((1.0 - GAMMA) * tau1[i] * p1 + GAMMA * tau2[i] * p2)
+        for i in range(nw):
+            phi[d, i] = y2[3 + i]
+            out_torque[d, i] = tau2[i]
+            out_slip[d, i] = slip[i]
+        w = y2[2]
+        vel[d, 0], vel[d, 1], vel[d, 2] = y2[0] + w * cy, y2[1] - w * cx, w
+        out_speed[d, 1] = math.hypot(vel[d, 0], vel[d, 1])
+        for j in range(steer_cols.shape[1]):
+            c = steer_cols[d, j]
+            out_steer[d, j] = 0.0 if c < 0 else wheel_angle(wh[c], dl, b[B_WHEELBASE])
         delta[d], delta_rate[d] = dl, dr
         out_twist[d, 0], out_twist[d, 1], out_twist[d, 2] = se2_log(rx, ry, rth, dt)
-        out_nsub[d] = n_sub
+        out_nsub[d] = taken

@@ -107,8 +107,8 @@ class DynamicsSpec:
 
     ``com_xy_m`` is the empty robot's centre of mass in the robot frame (from P); None puts it
     at the footprint centre. ``yaw_inertia_kg_m2`` is about that centre; None takes a uniform
-    box of the body's size. ``max_substep_s`` caps the automatic sub-step (None: chosen for
-    stability from the contact stiffness, see docs/dynamics.md)."""
+    box of the body's size. ``max_substep_s`` caps the sub-step (None: one a step, halved
+    where needed, see docs/dynamics.md)."""
 
     mass_kg: float = 40.0
     yaw_inertia_kg_m2: float | None = None

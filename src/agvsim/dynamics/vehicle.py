@@ -141,8 +141,6 @@ class Dynamics:
             self._fill(d, r, None)
             cols = list(r.model.steered_wheels)
             self.steer_cols[d, : len(cols)] = cols
-        self._has_steer_col = self.steer_cols >= 0
-        self._steer_take = np.maximum(self.steer_cols, 0)
         self.loads = [r.dynamics.load for r in self.robots]  # type: ignore[union-attr]
         self.brakes = BrakeMonitor(n)
         self.reset(np.zeros(n))
@@ -160,6 +158,10 @@ class Dynamics:
         mot = spec.motor
         j_driven = spec.wheel_inertia_kg_m2 + mot.rotor_inertia_kg_m2 * mot.gear_ratio**2
         tab[:, K.W_J] = np.where(tab[:, K.W_DRIVEN] > 0, j_driven, spec.wheel_inertia_kg_m2)
+        ang = tab[:, K.W_BETA]
+        tab[:, K.W_DIRS], tab[:, K.W_DIRS + 1] = np.cos(ang), np.sin(ang)
+        ang = ang + tab[:, K.W_GAMMA]
+        tab[:, K.W_DIRS + 2], tab[:, K.W_DIRS + 3] = np.cos(ang), np.sin(ang)
         self.wheel[d] = 0.0
         self.wheel[d, :nw] = tab
         r = float(np.asarray(model.wheel_radius_m))
@@ -167,11 +169,13 @@ class Dynamics:
         b = self.body[d]
         b[K.B_MASS], b[K.B_INERTIA] = mp.mass_kg, mp.yaw_inertia_kg_m2
         b[K.B_CX], b[K.B_CY] = mp.com_xy_m
+        b[K.B_LEVER] = float(np.hypot(tab[:, 0] - mp.com_xy_m[0], tab[:, 1] - mp.com_xy_m[1]).max())
         b[K.B_RADIUS] = r
         b[K.B_WHEELBASE] = float(np.asarray(getattr(model, "wheelbase_m", 1.0)))
         # the speed controller is tuned for the empty robot: a load makes it slower
         b[K.B_GAIN] = (j_driven + spec.mass_kg * r * r / n_drive) / mot.time_constant_s
         b[K.B_GEAR], b[K.B_TMAX] = mot.gear_ratio, mot.torque_max_nm
+        b[K.B_MTAU] = mot.time_constant_s
         b[K.B_TSTALL] = (
             3.0 * mot.torque_max_nm if mot.stall_torque_nm is None else mot.stall_torque_nm
         )
@@ -202,6 +206,11 @@ class Dynamics:
         self._fill(d, self.robots[d], load)
         self.loads[d] = load
 
+    def set_floor(self, floor: FloorFriction) -> None:
+        """A new floor (friction and its regions) from the next step."""
+        self.floor = floor
+        self._regions = floor.table()
+
     def mass_kg(self) -> np.ndarray:
         return self.body[:, K.B_MASS].copy()
 
@@ -227,6 +236,7 @@ class Dynamics:
         n, w = self.wheel.shape[:2]
         self.vel = np.zeros((n, 3))  # instantaneous twist at P
         self.phi = np.zeros((n, w))
+        self.last_targets = np.zeros((n, w))  # wheel-speed targets of the last step
         self.delta = np.asarray(steering, dtype=np.float64).copy()
         self.delta_rate = np.zeros(n)
         self.energy_j = np.zeros((n, w))  # motor work since reset
@@ -252,13 +262,14 @@ class Dynamics:
         n, w = self.wheel.shape[:2]
         twist = np.empty((n, 3))
         angle = np.empty((n, w))
-        steer = np.zeros((n, w))
-        torque = np.zeros((n, w))
-        slip = np.zeros((n, w))
-        work = np.zeros((n, w))
-        nsub = np.zeros(n, dtype=np.int64)
+        steer_angles = np.empty(self.steer_cols.shape)
+        torque = np.empty((n, w))
+        slip = np.empty((n, w))
+        work = np.empty((n, w))
+        nsub = np.empty(n, dtype=np.int64)
+        speed = np.empty((n, 2))
+        braking = np.empty(n, dtype=np.bool_)
         vel0 = self.vel.copy()
-        speed0 = np.hypot(vel0[:, 0], vel0[:, 1])
         K.step_robots(
             float(dt),
             np.ascontiguousarray(poses),
@@ -266,31 +277,28 @@ class Dynamics:
             self.floor.mu,
             self.body,
             self.wheel,
-            np.ascontiguousarray(targets),
+            np.ascontiguousarray(targets, dtype=np.float64),
             np.ascontiguousarray(delta_target, dtype=np.float64),
             np.ascontiguousarray(freeze, dtype=np.bool_),
+            self.last_targets,
             self.vel,
             self.phi,
             self.delta,
             self.delta_rate,
             twist,
             angle,
-            steer,
+            self.steer_cols,
+            steer_angles,
             torque,
             slip,
             work,
             nsub,
+            speed,
+            braking,
         )
         self.energy_j += work
         self.last_substeps = nsub
-        steer_angles = np.where(
-            self._has_steer_col, np.take_along_axis(steer, self._steer_take, axis=1), 0.0
-        )
-        driven = self.wheel[:, :, K.W_DRIVEN] > 0.5
-        braking = ~np.any(driven & (np.abs(targets) > 1e-12), axis=1)
-        self.brakes.update(
-            t_s, poses, twist, dt, speed0, np.hypot(self.vel[:, 0], self.vel[:, 1]), braking, vel0
-        )
+        self.brakes.update(t_s, poses, twist, dt, speed[:, 0], speed[:, 1], braking, vel0)
         for d in self.brakes.started:  # the closed form as loaded and on the floor now
             stop = self.brakes.active[d]
             assert stop is not None
@@ -299,9 +307,9 @@ class Dynamics:
             stop.deceleration_m_s2 = braking_deceleration_m_s2(
                 self.body[d], self.wheel[d], mu_w, stop.direction_rad
             )
-        return DynamicsStep(
-            twist, angle / dt, self.delta.copy(), steer_angles, torque, slip, work / dt, nsub
-        )
+        angle /= dt
+        work /= dt
+        return DynamicsStep(twist, angle, self.delta.copy(), steer_angles, torque, slip, work, nsub)
 
     def _mu_under(self, d: int, pose: np.ndarray) -> np.ndarray:
         """Friction under each wheel of row d at a world pose."""

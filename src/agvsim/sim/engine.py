@@ -29,6 +29,7 @@ from agvsim.control.api import (
     WheelCommand,
     command_to_array,
 )
+from agvsim.dynamics.spec import FloorFriction
 from agvsim.dynamics.vehicle import Dynamics
 from agvsim.geometry import box_tables
 from agvsim.kinematics import actuation
@@ -138,6 +139,11 @@ class Simulation:
         self._groups = self._build_groups()
         has_dyn = any(r.dynamics is not None for r in self.robots)
         self.dynamics = Dynamics(self.robots, world.floor, W_MAX, S_MAX) if has_dyn else None
+        self._dyn_sel: slice | np.ndarray = np.zeros(0, dtype=np.int64)
+        if self.dynamics is not None:  # the dynamic robots: a slice when they are consecutive
+            di = self.dynamics.idx
+            whole = np.array_equal(di, np.arange(di[0], di[0] + len(di)))
+            self._dyn_sel = slice(int(di[0]), int(di[0]) + len(di)) if whole else di
         hl_hw = np.array([r.footprint_half_m for r in self.robots], dtype=np.float64)
         self._half = hl_hw  # (N, 2)
         self._offset = np.array([r.body_offset_x_m for r in self.robots], dtype=np.float64)
@@ -407,7 +413,7 @@ class Simulation:
         forces made of them this step (agvsim.dynamics)."""
         st, dyn = self.state, self.dynamics
         assert dyn is not None
-        i = dyn.idx
+        i = self._dyn_sel
         out = dyn.step(
             st.poses[i],
             st.wheel_speeds[i],
@@ -433,6 +439,13 @@ class Simulation:
             self.cameras.set_world(self.world)
         self.collider.set_grid(grid)
         self._substep_len = 0.5 * min(grid.resolution_m, float(self._half.min()))
+
+    def set_floor(self, floor: FloorFriction) -> None:
+        """Change the floor's friction of the running simulation (a friction brush): robots
+        with dynamics feel it from the next step."""
+        self.world = dc_replace(self.world, floor=floor)
+        if self.dynamics is not None:
+            self.dynamics.set_floor(floor)
 
     def set_boxes(self, boxes: np.ndarray) -> None:
         """Change the static boxes ``(K, 5)`` of the running simulation (a box dropped on the
