@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
+from agvsim.master.config import MasterConfig
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
@@ -312,6 +313,9 @@ class Scenario(_Strict):
     )
     layout: LayoutConfig | None = Field(None, description="a track layout (LIF), docs/fleet.md")
     vda5050: Vda5050Config | None = Field(None, description="VDA 5050 vehicles, docs/fleet.md")
+    master: MasterConfig | None = Field(
+        None, description="transport orders, charging, breakdowns for the master, docs/master.md"
+    )
     _base_dir: Path = PrivateAttr(default=Path("."))
     _source: str = PrivateAttr(default="scenario")
 
