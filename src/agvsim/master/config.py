@@ -54,4 +54,7 @@ class MasterConfig(_Strict):
     )
     charging: ChargingConfig = Field(default_factory=ChargingConfig)
     breakdowns: list[BreakdownEntry] = Field(default_factory=list)
+    stall_s: float = Field(
+        default=300.0, gt=0, description="an order with no progress this long counts as stalled"
+    )
     margin_s: float = Field(default=0.5, ge=0, le=60, description="planned time between two visits")

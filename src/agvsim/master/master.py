@@ -68,6 +68,9 @@ class Agv:
     charger: str | None = None
     stop_charging_sent: bool = False
     orders_sent: int = 0
+    progress: tuple = ()  # what changes while the vehicle gets on with its order
+    progress_s: float = 0.0  # when it last changed
+    stalled: bool = False
 
     @property
     def battery_pct(self) -> float:
@@ -142,7 +145,7 @@ class Master:
             if agv.home is None and node in self.layout.nodes:
                 agv.home = node
                 agv.route = [Step(node, self.t_s, INF)]
-                v = Visit(serial, node, 0, self.t_s, INF)
+                v = Visit(serial, node, 0, self.t_s, INF, granted=True)
                 agv.visits = [v]
                 self.table.add(v)
 
@@ -207,7 +210,7 @@ class Master:
         for k, s in enumerate(steps):
             begin = held if k == 0 else steps[k - 1].depart_s
             end = steps[k + 1].arrive_s if k + 1 < len(steps) else INF
-            v = Visit(agv.serial, s.node, g + k, begin, end)
+            v = Visit(agv.serial, s.node, g + k, begin, end, granted=k == 0)
             visits.append(v)
             self.table.add(v)
         if not fresh:
@@ -236,6 +239,7 @@ class Master:
             v = agv.visits[agv.granted + 1]
             if v is None or self.table.first(v.node) is not v:
                 break
+            v.granted = True
             agv.granted += 1
 
     def _order(self, agv: Agv, t_s: float) -> dict:
@@ -391,7 +395,26 @@ class Master:
                 agv.sent, agv.changed = agv.granted, False
         self.metrics.step(self, dt)
         self._detect_deadlocks()
+        self._detect_stalls(t_s)
         return out
+
+    def _detect_stalls(self, t_s: float) -> None:
+        """A vehicle with an order that has neither passed a node, nor finished an action,
+        nor been sent anything for ``stall_s``: counted once (it must never happen)."""
+        for a in self.agvs.values():
+            st = a.state or {}
+            key = (
+                st.get("lastNodeSequenceId"),
+                a.order_id,
+                a.update_id,
+                sum(x.get("actionStatus") in ENDED for x in st.get("actionStates", [])),
+                a.job,
+            )
+            if key != a.progress or a.order_done or a.broken or a.job == "charging":
+                a.progress, a.progress_s, a.stalled = key, t_s, False
+            elif t_s - a.progress_s > self.cfg.stall_s and not a.stalled:
+                a.stalled = True
+                self.metrics.stalls += 1
 
     def _charging(self, t_s: float, out: list[Message]) -> None:
         low, full = self.cfg.charging.low_pct, self.cfg.charging.full_pct

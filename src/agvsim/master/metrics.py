@@ -25,6 +25,7 @@ class Metrics:
     energy_charged_pct: float = 0.0
     deadlocks: int = 0
     breakdowns: int = 0
+    stalls: int = 0
     collisions: int = 0  # filled in by the runner (the simulation counts contacts)
     _battery: dict[str, float] = field(default_factory=dict)
 
@@ -82,6 +83,7 @@ class Metrics:
             "energy_charged_pct": round(self.energy_charged_pct, 3),
             "collisions": self.collisions,
             "deadlocks": self.deadlocks,
+            "stalls": self.stalls,
             "breakdowns": self.breakdowns,
             "replan_failures": m.replan_failures,
         }

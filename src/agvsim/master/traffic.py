@@ -16,7 +16,9 @@ already reached the node after it. This is the action dependency graph of Hönig
 ("Persistent and robust execution of MAPF schedules in warehouses", RA-L 2019): every
 dependency points to a visit planned strictly earlier, so the graph has no cycle and the
 vehicle with the earliest pending visit can always move - no deadlock, whatever the delays.
-A visit is released (removed) as the vehicle passes the following node.
+A visit is released (removed) as the vehicle passes the following node. Vehicles may run
+ahead of their plan, so a granted visit counts as holding its node from the start of time:
+a new route can only be placed after it, never before.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ class Visit:
     index: int  # position in the vehicle's route (its VDA 5050 sequenceId is 2 * index)
     start_s: float  # planned: heads for the node
     end_s: float  # planned: reaches the next node (inf: parks here)
+    granted: bool = False  # released to the vehicle (it may be there already)
 
     def key(self) -> tuple[float, str, int]:
         return (self.start_s, self.serial, self.index)
@@ -72,7 +75,10 @@ class Reservations:
         for v in self.visits.get(node, []):
             if v.serial == serial:
                 continue
-            a, b = v.start_s - self.margin_s, v.end_s + self.margin_s
+            # a granted visit holds its node from now on, whatever its planned start: a
+            # vehicle ahead of its plan may be there already
+            a = -INF if v.granted else v.start_s - self.margin_s
+            b = v.end_s + self.margin_s
             if a > lo:
                 out.append((lo, a))
             lo = max(lo, b)
