@@ -225,3 +225,28 @@ def test_ten_vehicles_one_hour_on_the_warehouse() -> None:
     assert s["energy_charged_pct"] > 0 and s["utilisation"]["charging"] > 0
     lt = sorted(t.lead_time_s for t in m.transports)
     assert s["lead_time_p95_s"] == pytest.approx(float(np.percentile(lt, 95)), abs=1e-3)
+
+
+def test_low_battery_goes_to_a_free_charger_and_comes_back() -> None:
+    sc = warehouse(2, MasterConfig())
+    v = sc.vda5050
+    low = [x.model_copy(update={"battery_pct": 25.0}) for x in v.vehicles]
+    sc2 = sc.model_copy(update={"vda5050": v.model_copy(update={"vehicles": low})})
+    sc2._base_dir, sc2._source = sc._base_dir, sc._source
+    r = Checked(sc2, duration_s=600, master_period_s=0.25)
+    r.run(until_s=60)
+    m = r.master
+    chargers = {a.serial: a.charger for a in m.agvs.values()}
+    assert all(chargers.values()) and len(set(chargers.values())) == 2  # one each
+    for a in m.agvs.values():
+        assert a.job == "charging" and a.charging
+        assert r.fleet.vehicle(a.serial).last_node.node_id == a.charger
+    r.run(until_s=400)
+    for a in m.agvs.values():
+        assert a.job == "idle" and not a.charging and a.charger is None
+        assert a.route[-1].node == a.home and a.order_done
+        # 90 %, less the way home (< 25 m at 0.05 %/m) and idling (< 300 s at 0.002 %/s)
+        assert m.cfg.charging.full_pct - 1.25 - 0.6 < a.battery_pct < m.cfg.charging.full_pct
+    s = r.summary()
+    assert s["energy_charged_pct"] >= 2 * (90 - 25)
+    assert s["utilisation"]["charging"] > 0.3

@@ -94,7 +94,7 @@ def test_sipp_dwell_and_parked_vehicle() -> None:
     lay = grid(3, 1)  # 0,0 - 1,0 - 2,0
     g, table = RoadGraph(lay, T, 1.0), Reservations(margin_s=0.0)
     r = plan_route(g, table, "A", "0,0", 0.0, [Stop("1,0", 3.0), Stop("0,0")])
-    assert [(s.node, s.stop) for s in r] == [("0,0", None), ("1,0", 0), ("0,0", None)]
+    assert [(s.node, s.stop) for s in r] == [("0,0", None), ("1,0", 0), ("0,0", 1)]
     assert r[1].depart_s == pytest.approx(1.0 + 3.0) and r[2].arrive_s == pytest.approx(5.0)
     table.add(Visit("P", "2,0", 0, 0.0, INF))  # parked for good
     with pytest.raises(NoRoute):

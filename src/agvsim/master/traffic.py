@@ -213,7 +213,7 @@ def plan_route(
             steps[-1].stop, steps[-1].depart_s = k - 1, depart
             continue
         steps.append(Step(n, best[(n, i, k)], depart))
-    steps[-1].depart_s = INF
+    steps[-1].depart_s, steps[-1].stop = INF, len(stops) - 1
     return steps
 
 
