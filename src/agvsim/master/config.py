@@ -47,6 +47,9 @@ class BreakdownEntry(_Strict):
 
 
 class MasterConfig(_Strict):
+    fleet_size: int | None = Field(
+        default=None, ge=1, description="only the first N vehicles of vda5050 (sweeps)"
+    )
     transports: list[TransportEntry] = Field(default_factory=list)
     generate: GenerateConfig | None = None
     dispatch: Literal["nearest_idle"] = Field(

@@ -23,7 +23,7 @@ from agvsim.fleet.run import FleetRun
 from agvsim.fleet.transport import BrokerAddress
 from agvsim.master.config import MasterConfig
 from agvsim.master.master import Master
-from agvsim.master.run import EPOCH, build_master
+from agvsim.master.run import EPOCH, build_master, with_fleet_size
 from agvsim.scenario import Scenario
 
 LISTEN = ("state", "factsheet")
@@ -97,6 +97,8 @@ class MasteredFleetRun(FleetRun):
         horizon_s: float | None = None,
         master_period_s: float = 0.25,
     ):
+        if sc.master is not None and sc.master.fleet_size is not None:
+            sc = with_fleet_size(sc, sc.master.fleet_size)
         super().__init__(sc, broker_url, epoch or EPOCH, seed)
         s = sc.seed if seed is None else seed
         self.master = build_master(sc, self.fleet, s, horizon_s or sc.duration_s)

@@ -28,7 +28,10 @@ def with_fleet_size(sc: Scenario, n: int) -> Scenario:
     if cfg is None:
         raise ScenarioError(sc._source, ["the scenario has no 'vda5050:' block of vehicles"])
     if not 1 <= n <= len(cfg.vehicles):
-        raise ValueError(f"fleet size {n}: the scenario has 1..{len(cfg.vehicles)} vehicles")
+        raise ScenarioError(
+            sc._source,
+            [f"master.fleet_size: {n}; the scenario has 1..{len(cfg.vehicles)} vehicles"],
+        )
     keep = cfg.vehicles[:n]
     names = {v.robot for v in keep}
     out = sc.model_copy(
@@ -71,6 +74,8 @@ class InProcessRun:
         duration_s: float | None = None,
         master_period_s: float | None = None,
     ):
+        if sc.master is not None and sc.master.fleet_size is not None:
+            sc = with_fleet_size(sc, sc.master.fleet_size)
         self.seed = sc.seed if seed is None else seed
         self.duration_s = sc.duration_s if duration_s is None else duration_s
         self.fleet = build_fleet(sc, epoch=EPOCH, seed=self.seed)
