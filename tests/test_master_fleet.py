@@ -50,6 +50,8 @@ class Checked(InProcessRun):
                 if self.sent % self.every == 0:
                     bad = problems("2.1.0", topic, msg)
                     assert not bad, (serial, topic, bad)
+                    bad3 = problems("3.0.0", topic, msg | {"version": "3.0.0"})
+                    assert not bad3, (serial, topic, bad3)  # fits the 3.0.0 schema as well
                 self.sent += 1
             held: dict[str, str] = {}
             for a in m.agvs.values():

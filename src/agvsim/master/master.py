@@ -87,8 +87,8 @@ class Agv:
         return self.route[self.granted].node
 
 
-def _action(aid: str, kind: str, **params: str) -> dict:
-    a: dict[str, Any] = {"actionId": aid, "actionType": kind, "blockingType": "HARD"}
+def _action(aid: str, kind: str, blocking: str = "HARD", **params: str) -> dict:
+    a: dict[str, Any] = {"actionId": aid, "actionType": kind, "blockingType": blocking}
     if params:
         a["actionParameters"] = [{"key": k, "value": v} for k, v in params.items()]
     return a
@@ -425,7 +425,9 @@ class Master:
                 if not agv.stop_charging_sent:
                     msg = agv.stamp.header("instantActions", t_s) | {
                         "actions": [
-                            _action(f"{agv.serial}-stopcharge-{agv.orders_sent}", "stopCharging")
+                            _action(
+                                f"{agv.serial}-stopcharge-{agv.orders_sent}", "stopCharging", "NONE"
+                            )
                         ]
                     }
                     out.append((agv.serial, "instantActions", msg))
