@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import paho.mqtt.client as mqtt
+import pytest
 from fleet_helpers import Mosquitto, room_scenario
 from test_master_fleet import PLUS
 
@@ -84,3 +85,28 @@ def test_master_over_mosquitto_delivers_both_orders(tmp_path: Path) -> None:
         spy.close()
         run.close()
         mosq.stop()
+
+
+def test_cli_fleet_runs_the_master_and_writes_its_outputs(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from agvsim.cli import app
+
+    path = room_scenario(
+        tmp_path,
+        [("agvW", "differential", "r4c1", 0.0), ("agvE", "differential", "r4c7", 180.0)],
+        picture=PLUS,
+        extra="master:\n  transports:\n    - {source: r4c2, destination: r4c6}\n",
+    )
+    out = tmp_path / "out"
+    res = CliRunner().invoke(
+        app, ["fleet", str(path), "--speed", "8", "--duration", "30", "--out", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    assert "master: agvsim's" in res.output
+    doc = json.loads((out / "summary.json").read_text())
+    s = doc["master"]
+    assert (s["orders_placed"], s["orders_completed"], s["collisions"]) == (1, 1, 0)
+    assert s["lead_time_mean_s"] > 0 and s["orders_per_hour"] == pytest.approx(3600 / 30, rel=0.01)
+    assert (out / "waiting.png").stat().st_size > 1000
+    assert f"outputs: {out}/summary.json, waiting.png" in res.output
