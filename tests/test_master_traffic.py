@@ -220,3 +220,17 @@ def test_planned_routes_never_overlap_and_always_finish(scene) -> None:
             if a.serial != b.serial:
                 assert a.end_s + table.margin_s <= b.start_s + 1e-9, (node, a, b)
     execute(routes, table, order)
+
+
+def test_wait_cycles_finds_each_deadlock_once() -> None:
+    from agvsim.master.master import wait_cycles
+
+    # A waits for B, B for C, C for A: one cycle; D waits for A (stuck behind it, not in it)
+    assert wait_cycles({"A": "B", "B": "C", "C": "A", "D": "A"}) == [frozenset("ABC")]
+    assert wait_cycles({"A": "B", "B": "C"}) == []  # C moves: no deadlock
+    assert wait_cycles({"A": "B", "B": "A", "C": "D", "D": "C"}) == [
+        frozenset("AB"),
+        frozenset("CD"),
+    ]
+    # the naive master's corridor swap, as a wait-for graph: head-on, each for the other
+    assert wait_cycles({"agvW": "agvE", "agvE": "agvW"}) == [frozenset({"agvW", "agvE"})]

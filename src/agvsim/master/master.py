@@ -19,12 +19,11 @@ from its decision point (the end of its base) and sent as an order update.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from typing import Any
 
 from agvsim.fleet.dialect import DIALECTS
 from agvsim.fleet.messages import Stamper
+from agvsim.master.agv import ENDED, Agv, action, order_message
 from agvsim.master.config import MasterConfig
 from agvsim.master.dispatch import POLICIES
 from agvsim.master.graph import RoadGraph
@@ -33,65 +32,23 @@ from agvsim.master.orders import Transport
 from agvsim.master.traffic import INF, NoRoute, Reservations, Step, Stop, Visit, plan_route
 from agvsim.world.lif import Layout
 
-ENDED = ("FINISHED", "FAILED")
 Message = tuple[str, str, dict]  # serial, topic, message
+PLANNED_DWELL_S = 3.0  # what a pick or a drop is planned to take (an estimate: order only)
 
 
-@dataclass
-class Agv:
-    """What the master knows of one vehicle."""
-
-    serial: str
-    manufacturer: str
-    version: str
-    stamp: Stamper
-    vehicle_type: str | None = None
-    speed_m_s: float = 1.0
-    home: str | None = None
-    map_id: str = "map"
-    state: dict | None = None
-    broken: bool = False
-    # the route: steps, their visits (None once released), what is granted and sent
-    route: list[Step] = field(default_factory=list)
-    visits: list[Visit | None] = field(default_factory=list)
-    granted: int = 0
-    sent: int = -1  # index of the last node sent as released (-1: nothing sent)
-    reached: int = 0
-    order_id: str = ""
-    update_id: int = 0
-    order_done: bool = True
-    changed: bool = False  # the horizon changed since the last message
-    actions: dict[int, list[dict]] = field(default_factory=dict)  # route index -> actions
-    stops: list[tuple[Stop, int]] = field(default_factory=list)  # stop, route index
-    job: str = "idle"  # idle | transport | home | charge | charging
-    transport: Transport | None = None
-    charger: str | None = None
-    stop_charging_sent: bool = False
-    orders_sent: int = 0
-    progress: tuple = ()  # what changes while the vehicle gets on with its order
-    progress_s: float = 0.0  # when it last changed
-    stalled: bool = False
-
-    @property
-    def battery_pct(self) -> float:
-        bs = (self.state or {}).get("batteryState") or (self.state or {}).get("powerSupply") or {}
-        return float(bs.get("batteryCharge", bs.get("stateOfCharge", 100.0)))
-
-    @property
-    def charging(self) -> bool:
-        bs = (self.state or {}).get("batteryState") or (self.state or {}).get("powerSupply") or {}
-        return bool(bs.get("charging", False))
-
-    @property
-    def decision_node(self) -> str:
-        return self.route[self.granted].node
-
-
-def _action(aid: str, kind: str, blocking: str = "HARD", **params: str) -> dict:
-    a: dict[str, Any] = {"actionId": aid, "actionType": kind, "blockingType": blocking}
-    if params:
-        a["actionParameters"] = [{"key": k, "value": v} for k, v in params.items()]
-    return a
+def wait_cycles(waits: dict[str, str]) -> list[frozenset[str]]:
+    """The cycles of a wait-for graph in which each vehicle waits for at most one other."""
+    found: list[frozenset[str]] = []
+    for s in sorted(waits):
+        seen, cur = [s], waits.get(s)
+        while cur is not None and cur not in seen:
+            seen.append(cur)
+            cur = waits.get(cur)
+        if cur is not None:
+            cycle = frozenset(seen[seen.index(cur) :])
+            if cycle not in found:
+                found.append(cycle)
+    return found
 
 
 class Master:
@@ -242,43 +199,6 @@ class Master:
             v.granted = True
             agv.granted += 1
 
-    def _order(self, agv: Agv, t_s: float) -> dict:
-        first = 0 if agv.sent < 0 else agv.sent
-        nodes, edges = [], []
-        g = self.graph(agv)
-        for i in range(first, len(agv.route)):
-            n = agv.route[i].node
-            x, y = self.layout.node_xy(n)
-            nodes.append(
-                {
-                    "nodeId": n,
-                    "sequenceId": 2 * i,
-                    "released": i <= agv.granted,
-                    "nodePosition": {"x": x, "y": y, "mapId": agv.map_id},
-                    "actions": agv.actions.get(i, []),
-                }
-            )
-            if i > first:
-                prev = agv.route[i - 1].node
-                edges.append(
-                    {
-                        "edgeId": g.arc(prev, n).edge_id,
-                        "sequenceId": 2 * i - 1,
-                        "released": i <= agv.granted,
-                        "startNodeId": prev,
-                        "endNodeId": n,
-                        "actions": [],
-                    }
-                )
-        if agv.sent >= 0:
-            agv.update_id += 1
-        return agv.stamp.header("order", t_s) | {
-            "orderId": agv.order_id,
-            "orderUpdateId": agv.update_id,
-            "nodes": nodes,
-            "edges": edges,
-        }
-
     # ------------------------------------------------------------------ per vehicle
     def _progress(self, agv: Agv, t_s: float, out: list[Message]) -> None:
         st = agv.state
@@ -334,7 +254,7 @@ class Master:
         here = agv.route[-1 if agv.order_done else agv.granted].node
         free.sort(key=lambda c: (self.static_time(agv, here, c), c))
         for c in free:
-            acts = [_action(f"{agv.serial}-charge-{agv.orders_sent}-{c}", "startCharging")]
+            acts = [action(f"{agv.serial}-charge-{agv.orders_sent}-{c}", "startCharging")]
             if self.assign(agv, [(Stop(c), acts)], t_s):
                 agv.job, agv.charger, agv.stop_charging_sent = "charge", c, False
                 return True
@@ -391,7 +311,9 @@ class Master:
                 continue
             self._grant(agv)
             if agv.granted > agv.sent or agv.changed:
-                out.append((agv.serial, "order", self._order(agv, t_s)))
+                out.append(
+                    (agv.serial, "order", order_message(agv, self.layout, self.graph(agv), t_s))
+                )
                 agv.sent, agv.changed = agv.granted, False
         self.metrics.step(self, dt)
         self._detect_deadlocks()
@@ -425,7 +347,7 @@ class Master:
                 if not agv.stop_charging_sent:
                     msg = agv.stamp.header("instantActions", t_s) | {
                         "actions": [
-                            _action(
+                            action(
                                 f"{agv.serial}-stopcharge-{agv.orders_sent}", "stopCharging", "NONE"
                             )
                         ]
@@ -473,12 +395,12 @@ class Master:
             n = tr.attempts
             stops = [
                 (
-                    Stop(tr.source, self._dwell("pick")),
-                    [_action(f"{tr.transport_id}-pick-{n}", "pick", loadId=tr.transport_id)],
+                    Stop(tr.source, PLANNED_DWELL_S),
+                    [action(f"{tr.transport_id}-pick-{n}", "pick", loadId=tr.transport_id)],
                 ),
                 (
-                    Stop(tr.destination, self._dwell("drop")),
-                    [_action(f"{tr.transport_id}-drop-{n}", "drop")],
+                    Stop(tr.destination, PLANNED_DWELL_S),
+                    [action(f"{tr.transport_id}-drop-{n}", "drop")],
                 ),
                 (Stop(agv.home or ""), []),
             ]
@@ -490,12 +412,9 @@ class Master:
                 left.append(tr)
         self.pending = left
 
-    def _dwell(self, kind: str) -> float:
-        return 3.0
-
     def _detect_deadlocks(self) -> None:
-        """A cycle of vehicles each stopped at the end of its base, waiting for a node whose
-        first visit belongs to the next: counted once per cycle (it must never happen)."""
+        """Vehicles stopped at the end of their base, each waiting for a node whose first
+        visit belongs to another: a cycle among them is a deadlock, counted once."""
         waits: dict[str, str] = {}
         for a in self.agvs.values():
             if a.order_done or a.broken or a.granted + 1 >= len(a.route):
@@ -506,16 +425,10 @@ class Master:
             head = self.table.first(v.node) if v is not None else None
             if head is not None and head.serial != a.serial:
                 waits[a.serial] = head.serial
-        for s in waits:
-            seen, cur = [s], waits.get(s)
-            while cur is not None and cur not in seen:
-                seen.append(cur)
-                cur = waits.get(cur)
-            if cur is not None:
-                cycle = frozenset(seen[seen.index(cur) :])
-                if cycle not in self._deadlocks_seen:
-                    self._deadlocks_seen.add(cycle)
-                    self.metrics.deadlocks += 1
+        for cycle in wait_cycles(waits):
+            if cycle not in self._deadlocks_seen:
+                self._deadlocks_seen.add(cycle)
+                self.metrics.deadlocks += 1
 
     @property
     def all_delivered(self) -> bool:
