@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 from agvsim.world.lif import Layout
@@ -26,7 +27,10 @@ class Arc:
 class RoadGraph:
     """Directed arcs of ``layout`` that ``vehicle_type`` may use (every arc when None)."""
 
+    CACHED_GOALS = 256  # shortest-time tables kept (stations and homes repeat)
+
     def __init__(self, layout: Layout, vehicle_type: str | None, max_speed_m_s: float):
+        self._times: OrderedDict[str, dict[str, float]] = OrderedDict()
         if max_speed_m_s <= 0:
             raise ValueError(f"max_speed_m_s {max_speed_m_s}: must be > 0")
         self.layout = layout
@@ -54,7 +58,18 @@ class RoadGraph:
         raise KeyError(f"no edge {start} -> {end}")
 
     def times_to(self, goal: str) -> dict[str, float]:
-        """Shortest time (s) from every node that can reach ``goal`` (Dijkstra, reversed)."""
+        """Shortest time (s) from every node that can reach ``goal`` (Dijkstra, reversed;
+        the last ``CACHED_GOALS`` tables are kept). Do not modify the table returned."""
+        if goal in self._times:
+            self._times.move_to_end(goal)
+            return self._times[goal]
+        best = self._dijkstra_to(goal)
+        self._times[goal] = best
+        if len(self._times) > self.CACHED_GOALS:
+            self._times.popitem(last=False)
+        return best
+
+    def _dijkstra_to(self, goal: str) -> dict[str, float]:
         best = {goal: 0.0}
         heap = [(0.0, goal)]
         while heap:

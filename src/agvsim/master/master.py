@@ -65,7 +65,6 @@ class Master:
         self.policy = POLICIES[cfg.dispatch]
         self.agvs: dict[str, Agv] = {}
         self._graphs: dict[tuple[str | None, float], RoadGraph] = {}
-        self._static: dict[tuple[str, str], dict[str, float]] = {}
         self.upcoming = sorted(transports or [], key=lambda x: (x.created_s, x.transport_id))
         self.pending: list[Transport] = []
         self.transports: list[Transport] = list(self.upcoming)
@@ -116,10 +115,7 @@ class Master:
         return self._graphs[key]
 
     def static_time(self, agv: Agv, a: str, b: str) -> float:
-        key = (str(agv.vehicle_type), b)
-        if key not in self._static:
-            self._static[key] = self.graph(agv).times_to(b)
-        return self._static[key].get(a, INF)
+        return self.graph(agv).times_to(b).get(a, INF)
 
     def _ready(self, agv: Agv) -> bool:
         return agv.home is not None and agv.vehicle_type is not None and agv.state is not None
