@@ -48,6 +48,7 @@ class Agv:
     progress: tuple = ()  # what changes while the vehicle gets on with its order
     progress_s: float = 0.0  # when it last changed
     stalled: bool = False
+    replan: bool = False  # its route crosses a broken vehicle: re-plan as soon as one fits
 
     @property
     def battery_pct(self) -> float:

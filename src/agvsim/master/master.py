@@ -289,6 +289,7 @@ class Master:
             if any(v.node in blocked for v in ahead):
                 if not self.assign(other, self._remaining_stops(other), t_s):
                     self.replan_failures += 1
+                    other.replan = True
 
     # ------------------------------------------------------------------ the tick
     def tick(self, t_s: float) -> list[Message]:
@@ -301,6 +302,9 @@ class Master:
             if self._ready(agv):
                 self._progress(agv, t_s, out)
         self._charging(t_s, out)
+        for agv in self.agvs.values():
+            if agv.replan and not agv.broken and not agv.order_done:
+                agv.replan = not self.assign(agv, self._remaining_stops(agv), t_s)
         self._dispatch(t_s)
         for agv in self.agvs.values():
             if not self._ready(agv) or agv.broken or agv.order_done and not agv.changed:
