@@ -256,3 +256,23 @@ def test_low_battery_goes_to_a_free_charger_and_comes_back() -> None:
     s = r.summary()
     assert s["energy_charged_pct"] >= 2 * (90 - 25)
     assert s["utilisation"]["charging"] > 0.3
+
+
+def test_validate_checks_the_master_block(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from agvsim.cli import app
+
+    text = (ROOT / "scenarios" / "warehouse_operations.yaml").read_text()
+    bad = text.replace("until_s: 3300}", "until_s: 3300, sources: [rack1-A, rackZ]}")
+    assert bad != text
+    (tmp_path / "fleet_warehouse.lif.json").write_text(
+        (ROOT / "scenarios" / "fleet_warehouse.lif.json").read_text()
+    )
+    path = tmp_path / "ops.yaml"
+    path.write_text(bad)
+    res = CliRunner().invoke(app, ["validate", str(path)])
+    assert res.exit_code == 2
+    assert "master.generate.sources: 'rackZ' is neither a station nor a node" in res.output
+    path.write_text(text)
+    assert CliRunner().invoke(app, ["validate", str(path)]).exit_code == 0

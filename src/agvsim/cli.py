@@ -255,7 +255,11 @@ def validate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file."
         else:  # vehicles start on layout nodes
             from agvsim.fleet.build import build_fleet
 
-            build_fleet(sc)
+            fleet = build_fleet(sc)
+            if sc.master is not None:  # station and vehicle names of the master's block
+                from agvsim.master.run import build_master
+
+                build_master(sc, fleet, sc.seed, sc.duration_s)
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None
