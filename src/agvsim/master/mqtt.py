@@ -14,7 +14,7 @@ import json
 import threading
 import time
 from collections import deque
-from datetime import datetime
+from datetime import UTC, datetime
 from typing import Any
 
 import paho.mqtt.client as mqtt
@@ -23,7 +23,7 @@ from agvsim.fleet.run import FleetRun
 from agvsim.fleet.transport import BrokerAddress
 from agvsim.master.config import MasterConfig
 from agvsim.master.master import Master
-from agvsim.master.run import EPOCH, build_master, with_fleet_size
+from agvsim.master.run import build_master, with_fleet_size
 from agvsim.scenario import Scenario
 
 LISTEN = ("state", "factsheet")
@@ -99,9 +99,10 @@ class MasteredFleetRun(FleetRun):
     ):
         if sc.master is not None and sc.master.fleet_size is not None:
             sc = with_fleet_size(sc, sc.master.fleet_size)
-        super().__init__(sc, broker_url, epoch or EPOCH, seed)
+        epoch = epoch or datetime.now(UTC)  # on the wire: wall-clock timestamps
+        super().__init__(sc, broker_url, epoch, seed)
         s = sc.seed if seed is None else seed
-        self.master = build_master(sc, self.fleet, s, horizon_s or sc.duration_s)
+        self.master = build_master(sc, self.fleet, s, horizon_s or sc.duration_s, epoch)
         cfg = sc.master or MasterConfig()
         self.breakdowns = sorted((b.at_s, b.vehicle) for b in cfg.breakdowns)
         self.link = MqttMaster(self.master, self.address, self.fleet.interface_name)

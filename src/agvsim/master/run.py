@@ -44,7 +44,11 @@ def with_fleet_size(sc: Scenario, n: int) -> Scenario:
     return out
 
 
-def build_master(sc: Scenario, fleet: Fleet, seed: int, horizon_s: float) -> Master:
+def build_master(
+    sc: Scenario, fleet: Fleet, seed: int, horizon_s: float, epoch: datetime = EPOCH
+) -> Master:
+    """The scenario's master (its ``master:`` block, or the defaults); ScenarioError names
+    every bad station, node or vehicle. ``epoch``: time zero of the messages' timestamps."""
     if fleet.layout is None:
         raise ScenarioError(sc._source, ["the master needs a 'layout:' block"])
     cfg = sc.master or MasterConfig()
@@ -60,7 +64,7 @@ def build_master(sc: Scenario, fleet: Fleet, seed: int, horizon_s: float) -> Mas
         problems.append(str(e))
     if problems:
         raise ScenarioError(sc._source, problems)
-    return Master(fleet.layout, cfg, transports, EPOCH)
+    return Master(fleet.layout, cfg, transports, epoch)
 
 
 class InProcessRun:
