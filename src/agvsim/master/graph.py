@@ -1,8 +1,11 @@
 """The layout as a routing graph for one vehicle type: directed edges with lengths and times.
 
 An edge's time is its length over the slower of the edge's speed limit and the vehicle's top
-speed (trajectories: the sampled NURBS length). Shortest times come from Dijkstra / A* over a
-binary heap (``heapq``); networkx is not a dependency and the graph is small and plain.
+speed (trajectories: the sampled NURBS length). ``astar`` is a small A* over a binary heap
+(``heapq``): networkx is not a dependency. The shortest times to a goal from every node (the
+route planner's heuristic, the dispatcher's cost) come from SciPy's compiled Dijkstra
+(``scipy.sparse.csgraph``) on the reversed graph: on a 5,000-node layout a pure-Python
+Dijkstra took ~0.1 s a goal.
 """
 
 from __future__ import annotations
@@ -12,7 +15,33 @@ import math
 from collections import OrderedDict
 from dataclasses import dataclass
 
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
 from agvsim.world.lif import Layout
+
+
+class Times:
+    """Shortest times (s) to one goal by node id; ``get`` gives ``default`` (inf) for a node
+    that cannot reach it."""
+
+    def __init__(self, index: dict[str, int], times: list[float]):
+        self._index, self._times = index, times
+
+    def get(self, node: str, default: float = math.inf) -> float:
+        k = self._index.get(node)
+        t = math.inf if k is None else self._times[k]
+        return default if t == math.inf else t
+
+    def __getitem__(self, node: str) -> float:
+        t = self.get(node)
+        if t == math.inf:
+            raise KeyError(node)
+        return t
+
+    def __contains__(self, node: object) -> bool:
+        return isinstance(node, str) and self.get(node) != math.inf
 
 
 @dataclass(frozen=True)
@@ -30,7 +59,7 @@ class RoadGraph:
     CACHED_GOALS = 256  # shortest-time tables kept (stations and homes repeat)
 
     def __init__(self, layout: Layout, vehicle_type: str | None, max_speed_m_s: float):
-        self._times: OrderedDict[str, dict[str, float]] = OrderedDict()
+        self._times: OrderedDict[str, Times] = OrderedDict()
         if max_speed_m_s <= 0:
             raise ValueError(f"max_speed_m_s {max_speed_m_s}: must be > 0")
         self.layout = layout
@@ -50,6 +79,19 @@ class RoadGraph:
             arc = Arc(e.edge_id, e.start, e.end, length, length / speed)
             self.out[e.start].append(arc)
             self.into[e.end].append(arc)
+        self.ids = sorted(layout.nodes)
+        self.index = {n: k for k, n in enumerate(self.ids)}
+        fastest: dict[tuple[int, int], float] = {}
+        for arcs in self.out.values():
+            for a in arcs:
+                key = (self.index[a.end], self.index[a.start])  # reversed: towards the goal
+                fastest[key] = min(fastest.get(key, math.inf), max(a.time_s, 1e-9))
+        n = len(self.ids)
+        rows = np.array([k[0] for k in fastest], dtype=np.int64)
+        cols = np.array([k[1] for k in fastest], dtype=np.int64)
+        self._reversed = csr_matrix(
+            (np.array(list(fastest.values()), dtype=np.float64), (rows, cols)), shape=(n, n)
+        )
 
     def arc(self, start: str, end: str) -> Arc:
         for a in self.out[start]:
@@ -57,7 +99,7 @@ class RoadGraph:
                 return a
         raise KeyError(f"no edge {start} -> {end}")
 
-    def times_to(self, goal: str) -> dict[str, float]:
+    def times_to(self, goal: str) -> Times:
         """Shortest time (s) from every node that can reach ``goal`` (Dijkstra, reversed;
         the last ``CACHED_GOALS`` tables are kept). Do not modify the table returned."""
         if goal in self._times:
@@ -69,19 +111,9 @@ class RoadGraph:
             self._times.popitem(last=False)
         return best
 
-    def _dijkstra_to(self, goal: str) -> dict[str, float]:
-        best = {goal: 0.0}
-        heap = [(0.0, goal)]
-        while heap:
-            t, n = heapq.heappop(heap)
-            if t > best[n]:
-                continue
-            for a in self.into[n]:
-                nt = t + a.time_s
-                if nt < best.get(a.start, math.inf):
-                    best[a.start] = nt
-                    heapq.heappush(heap, (nt, a.start))
-        return best
+    def _dijkstra_to(self, goal: str) -> Times:
+        dist = dijkstra(self._reversed, directed=True, indices=self.index[goal])
+        return Times(self.index, dist.tolist())
 
     def astar(self, start: str, goal: str) -> tuple[list[str], float] | None:
         """The quickest node path and its time (s), or None when ``goal`` is unreachable.

@@ -146,14 +146,17 @@ def plan_route(
     Key = tuple[str, int, int]
     best: dict[Key, float] = {(start, i0, 0): t0_s}
     parent: dict[Key, tuple[Key, float] | None] = {(start, i0, 0): None}
+    # ties of f (many equally quick ways on a grid; f rounded to the microsecond so that sums
+    # in another order tie too) go to the state furthest along: -g
     heap: list[tuple[float, float, str, int, int]] = [
-        (t0_s + to_stop[0][start] + rest[0], t0_s, start, i0, 0)
+        (round(t0_s + to_stop[0][start] + rest[0], 6), -t0_s, start, i0, 0)
     ]
     closed: set[Key] = set()
     expansions = 0
     goal: Key | None = None
     while heap:
-        _, a, u, i, k = heapq.heappop(heap)
+        _, neg_a, u, i, k = heapq.heappop(heap)
+        a = -neg_a
         key = (u, i, k)
         if key in closed:
             continue
@@ -173,7 +176,7 @@ def plan_route(
                 if a2 < hi and a2 < best.get(nk, INF):
                     best[nk], parent[nk] = a2, (key, -1.0)
                     h = to_stop[k + 1].get(u, INF) + rest[k + 1]
-                    heapq.heappush(heap, (a2 + h, a2, u, i, k + 1))
+                    heapq.heappush(heap, (round(a2 + h, 6), -a2, u, i, k + 1))
         for arc in graph.out[u]:
             h = to_stop[k].get(arc.end, INF)
             if h == INF:
@@ -190,7 +193,7 @@ def plan_route(
                 nk = (arc.end, j, k)
                 if arrive < best.get(nk, INF):
                     best[nk], parent[nk] = arrive, (key, d)
-                    heapq.heappush(heap, (arrive + h + rest[k], arrive, arc.end, j, k))
+                    heapq.heappush(heap, (round(arrive + h + rest[k], 6), -arrive, arc.end, j, k))
     if goal is None:
         raise NoRoute(
             f"no conflict-free route for {serial} from {start} through "
