@@ -39,6 +39,7 @@ class Checked(InProcessRun):
         self.closest_m = math.inf
         self.sent = 0
         self.every = validate_every  # the schema check costs ~40 ms a message
+        self.orders: dict[str, list[dict]] = {}
 
     def step(self) -> None:
         m = self.master
@@ -47,6 +48,8 @@ class Checked(InProcessRun):
         def tick(t_s: float):
             out = orig(t_s)
             for serial, topic, msg in out:
+                if topic == "order":
+                    self.orders.setdefault(serial, []).append(msg)
                 if self.sent % self.every == 0:
                     bad = problems("2.1.0", topic, msg)
                     assert not bad, (serial, topic, bad)
@@ -103,6 +106,29 @@ def test_two_vehicles_cross_one_intersection_in_opposite_directions(tmp_path: Pa
         assert a.order_done and a.route[-1].node == a.home
         assert r.fleet.vehicle(a.serial).last_node.node_id == a.home
     assert r.sent >= 4
+    for orders in r.orders.values():
+        assert_base_and_horizon(orders)
+
+
+def assert_base_and_horizon(orders: list[dict]) -> None:
+    """Each order's released nodes and edges are a prefix (base, then horizon); each update
+    starts at the previous message's last released node (VDA 5050 6.6.2) and releases more."""
+    last: tuple[str, int] | None = None
+    for k, o in enumerate(orders):
+        rel = [n["released"] for n in o["nodes"]]
+        assert rel == sorted(rel, reverse=True) and rel[0], rel
+        erel = [e["released"] for e in o["edges"]]
+        assert erel == rel[1:]  # an edge is released with the node it leads to
+        seqs = [n["sequenceId"] for n in o["nodes"]]
+        assert seqs == list(range(seqs[0], seqs[0] + 2 * len(seqs), 2))
+        first = (o["nodes"][0]["nodeId"], o["nodes"][0]["sequenceId"])
+        if k and o["orderId"] == orders[k - 1]["orderId"]:
+            assert o["orderUpdateId"] == orders[k - 1]["orderUpdateId"] + 1
+            assert first == last
+        else:
+            assert o["orderUpdateId"] == 0 and first[1] == 0
+        released = [n for n in o["nodes"] if n["released"]]
+        last = (released[-1]["nodeId"], released[-1]["sequenceId"])
 
 
 def test_corridor_swap_is_resolved(tmp_path: Path) -> None:
@@ -174,6 +200,8 @@ def test_breakdown_mid_order_reassigns_and_reroutes() -> None:
             assert not set(late) & blocked, (a.serial, set(late) & blocked)
     s = r.summary()
     assert (s["breakdowns"], s["collisions"], s["deadlocks"], s["stalls"]) == (1, 0, 0, 0)
+    for orders in r.orders.values():  # re-planned routes went out as stitched updates
+        assert_base_and_horizon(orders)
     assert s["utilisation"]["broken"] > 0
 
 
@@ -229,6 +257,8 @@ def test_ten_vehicles_one_hour_on_the_warehouse() -> None:
     assert r.fleet.sim.state.wall_collisions.sum() == 0
     assert r.closest_m > 0.6
     assert s["energy_charged_pct"] > 0 and s["utilisation"]["charging"] > 0
+    for orders in r.orders.values():
+        assert_base_and_horizon(orders)
     lt = sorted(t.lead_time_s for t in m.transports)
     assert s["lead_time_p95_s"] == pytest.approx(float(np.percentile(lt, 95)), abs=1e-3)
 
