@@ -49,6 +49,7 @@ class Agv:
     progress_s: float = 0.0  # when it last changed
     stalled: bool = False
     replan: bool = False  # its route crosses a broken vehicle: re-plan as soon as one fits
+    retimed_s: float = -1e9  # when it was last re-planned for being late
 
     @property
     def battery_pct(self) -> float:

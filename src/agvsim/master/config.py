@@ -60,4 +60,9 @@ class MasterConfig(_Strict):
     stall_s: float = Field(
         default=300.0, gt=0, description="an order with no progress this long counts as stalled"
     )
+    late_s: float = Field(
+        default=15.0,
+        gt=0,
+        description="a vehicle this far behind its plan is re-planned (others stop waiting)",
+    )
     margin_s: float = Field(default=0.5, ge=0, le=60, description="planned time between two visits")

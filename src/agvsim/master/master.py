@@ -151,6 +151,9 @@ class Master:
                 [s for s, _ in stops],
                 held_since_s=held,
                 stop_at_start=fresh,
+                avoid=frozenset(
+                    a.home for a in self.agvs.values() if a is not agv and a.home is not None
+                ),
             )
         except NoRoute:
             for v in old:
@@ -305,6 +308,10 @@ class Master:
         for agv in self.agvs.values():
             if agv.replan and not agv.broken and not agv.order_done:
                 agv.replan = not self.assign(agv, self._remaining_stops(agv), t_s)
+            elif self._late(agv, t_s):
+                agv.retimed_s = t_s
+                if self.assign(agv, self._remaining_stops(agv), t_s):
+                    self.metrics.retimed += 1
         self._dispatch(t_s)
         for agv in self.agvs.values():
             if not self._ready(agv) or agv.broken or agv.order_done and not agv.changed:
@@ -319,6 +326,18 @@ class Master:
         self._detect_deadlocks()
         self._detect_stalls(t_s)
         return out
+
+    def _late(self, agv: Agv, t_s: float) -> bool:
+        """Behind its plan by ``late_s`` (at the next node), with a part not yet granted, and
+        not re-planned for that in the last ``late_s``. Re-planning it moves its pending
+        visits after everyone else's: vehicles queued behind them go first (the planned
+        order stays consistent, so the dependency graph stays acyclic)."""
+        if agv.order_done or agv.broken or agv.state is None or not self._ready(agv):
+            return False
+        if agv.granted + 1 >= len(agv.route) or t_s - agv.retimed_s < self.cfg.late_s:
+            return False
+        nxt = agv.route[min(agv.reached + 1, len(agv.route) - 1)]
+        return t_s - nxt.arrive_s > self.cfg.late_s
 
     def _detect_stalls(self, t_s: float) -> None:
         """A vehicle with an order that has neither passed a node, nor finished an action,

@@ -26,6 +26,7 @@ class Metrics:
     deadlocks: int = 0
     breakdowns: int = 0
     stalls: int = 0
+    retimed: int = 0  # routes re-planned because their vehicle ran late
     collisions: int = 0  # filled in by the runner (the simulation counts contacts)
     _battery: dict[str, float] = field(default_factory=dict)
 
@@ -86,4 +87,5 @@ class Metrics:
             "stalls": self.stalls,
             "breakdowns": self.breakdowns,
             "replan_failures": m.replan_failures,
+            "late_replans": self.retimed,
         }

@@ -116,13 +116,16 @@ def plan_route(
     stops: Sequence[Stop],
     held_since_s: float | None = None,
     stop_at_start: bool = True,
+    avoid: frozenset[str] = frozenset(),
     max_expansions: int = 100_000,
 ) -> list[Step]:
     """The quickest route from ``start`` (at ``t0_s``) through ``stops`` that fits the gaps
     of ``table``, ending parked on the last stop. The vehicle has held ``start`` since
     ``held_since_s`` (default ``t0_s``): the gap it starts in must cover that too.
     ``stop_at_start`` False: a stop on ``start`` needs leaving and coming back (an order
-    update cannot add actions to its first node). Raises NoRoute."""
+    update cannot add actions to its first node). ``avoid``: nodes never to enter (other
+    vehicles' parking places: a car-like vehicle cannot dodge into a dead end). Raises
+    NoRoute."""
     if not stops:
         raise ValueError("a route needs at least one stop")
     to_stop = [graph.times_to(s.node) for s in stops]
@@ -178,6 +181,8 @@ def plan_route(
                     h = to_stop[k + 1].get(u, INF) + rest[k + 1]
                     heapq.heappush(heap, (round(a2 + h, 6), -a2, u, i, k + 1))
         for arc in graph.out[u]:
+            if arc.end in avoid:
+                continue
             h = to_stop[k].get(arc.end, INF)
             if h == INF:
                 continue
