@@ -20,6 +20,21 @@ master:
 """
 
 
+DIFF = "    params: {wheel_radius_m: 0.1, half_track_m: 0.22}"
+
+
+def differential_only(lines: list[str]) -> list[str]:
+    """Every robot a differential drive (same body, start and colour)."""
+    out = []
+    for ln in lines:
+        if ln.startswith("    model: "):
+            ln = "    model: differential"
+        elif ln.startswith("    params: "):
+            ln = DIFF
+        out.append(ln)
+    return out
+
+
 def main() -> None:
     base = (HERE / "fleet_warehouse.yaml").read_text(encoding="utf-8")
     body = [ln for ln in base.splitlines() if not ln.startswith("#")]
@@ -38,6 +53,11 @@ def main() -> None:
     out = HERE / "warehouse_operations.yaml"
     out.write_text("\n".join(head + body) + "\n" + MASTER, encoding="utf-8")
     print(f"wrote {out}")
+    diff = [ln.replace("(master control", "(differential fleet, master control") for ln in body]
+    head2 = [head[0], "# warehouse's 20 vehicles, all differential drives (fleet-size sweep)."]
+    out2 = HERE / "warehouse_operations_differential.yaml"
+    out2.write_text("\n".join(head2 + differential_only(diff)) + "\n" + MASTER, encoding="utf-8")
+    print(f"wrote {out2}")
 
 
 if __name__ == "__main__":
