@@ -302,11 +302,20 @@ def fleet(
     export_layout: Annotated[
         Path | None, typer.Option(help="Write the scenario's layout as a LIF file and exit.")
     ] = None,
+    no_master: Annotated[
+        bool, typer.Option("--no-master", help="No master: leave the vehicles to an external one.")
+    ] = False,
+    out_dir: Annotated[
+        Path | None, typer.Option("--out", help="Master outputs (default: runs/fleet/SCENARIO).")
+    ] = None,
 ) -> None:
-    """Run the scenario's VDA 5050 vehicles on MQTT for an external master (docs/fleet.md)."""
+    """Run the scenario's VDA 5050 vehicles on MQTT with agvsim's master control, or for an
+    external master (--no-master); docs/fleet.md, docs/master.md."""
     from agvsim.fleet.cli import fleet_command
 
-    code = fleet_command(scenario, broker, speed, duration, export_layout, out, err)
+    code = fleet_command(
+        scenario, broker, speed, duration, export_layout, out, err, not no_master, out_dir
+    )
     if code:
         raise typer.Exit(code)
 
@@ -330,7 +339,11 @@ def validate(
         else:  # vehicles start on layout nodes
             from agvsim.fleet.build import build_fleet
 
-            build_fleet(sc)
+            fleet = build_fleet(sc)
+            if sc.master is not None:  # station and vehicle names of the master's block
+                from agvsim.master.run import build_master
+
+                build_master(sc, fleet, sc.seed, sc.duration_s)
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None

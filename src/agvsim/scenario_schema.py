@@ -25,6 +25,7 @@ from pydantic import (
 
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
+from agvsim.master.config import MasterConfig
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
@@ -394,6 +395,9 @@ class Scenario(_Strict):
     limits: LimitsConfig | None = Field(None, description="raise the run's resource limits")
     layout: LayoutConfig | None = Field(None, description="a track layout (LIF), docs/fleet.md")
     vda5050: Vda5050Config | None = Field(None, description="VDA 5050 vehicles, docs/fleet.md")
+    master: MasterConfig | None = Field(
+        None, description="transport orders, charging, breakdowns for the master, docs/master.md"
+    )
     _base_dir: Path = PrivateAttr(default=Path("."))
     _source: str = PrivateAttr(default="scenario")
     _limits: Any = PrivateAttr(default=None)  # the Limits it was checked against

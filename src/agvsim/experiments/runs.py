@@ -42,6 +42,11 @@ def execute(task: RunTask) -> dict:
     try:
         sc = parse_scenario(task.scenario, task.source)
         sc._base_dir, sc._source = Path(task.base_dir), task.source
+        if sc.master is not None:  # a fleet with its master control (docs/master.md)
+            from agvsim.master.sweep import fleet_row, is_fleet
+
+            if is_fleet(sc):
+                return fleet_row(sc, task.seed)
         sim = build(sc, seed=task.seed)
         sim.controller_time_limit_s = task.controller_time_limit_s
         return _simulate(sc, sim, task.source)

@@ -270,8 +270,13 @@ def _check_and_make_tasks(plan: SweepPlan, problems: list[str]) -> None:
         try:
             sc = parse_scenario(var.scenario, where)
             sc._base_dir, sc._source = plan.base_dir, plan.source
-            sim = build(sc, seed=plan.seeds[0])
-            row = dry_row(sc, sim, plan.source)
+            from agvsim.master.sweep import fleet_dry_row, is_fleet
+
+            if is_fleet(sc):  # a fleet with its master control (docs/master.md)
+                row = fleet_dry_row(sc, plan.seeds[0])
+            else:
+                sim = build(sc, seed=plan.seeds[0])
+                row = dry_row(sc, sim, plan.source)
         except ScenarioError as err:
             problems += [f"{where}: {p}" for p in err.problems]
             continue
@@ -315,6 +320,8 @@ def _plots(plan: SweepPlan, columns: list[str]) -> list[str]:
             )
         return list(plan.config.plots)
     preferred = [
+        "master.orders_per_hour",
+        "master.lead_time_mean_s",
         "reach.time_to_goal_s",
         "reach.reached",
         "capture.survival_time_s",

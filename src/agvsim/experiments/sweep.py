@@ -124,6 +124,11 @@ def run_sweep(
     if plots and table.num_rows:
         labels = {v.index: v.label for v in plan.variations}
         images = plot_columns(table, plan.plots, labels, out, plan.name)
+        if "master.fleet_size" in plan.config.vary:  # how many vehicles? (docs/master.md)
+            from agvsim.master.sweep import throughput_plot
+
+            tp = throughput_plot(table.to_pylist(), out, plan.name)
+            images += [tp] if tp is not None else []
     return SweepResult(plan, table, parquet, csv, images, executed, skipped, failed)
 
 

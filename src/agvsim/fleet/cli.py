@@ -21,8 +21,12 @@ def fleet_command(
     export_layout: Path | None,
     out: Any,
     err: Any,
+    master: bool = False,
+    out_dir: Path | None = None,
 ) -> int:
-    """Returns the exit code: 0 done, 1 cannot connect, 2 bad input, 130 interrupted."""
+    """Returns the exit code: 0 done, 1 cannot connect, 2 bad input, 130 interrupted.
+    ``master``: run agvsim's master control beside the vehicles (over the broker too) and
+    write its summary.json and waiting.png to ``out_dir`` at the end (docs/master.md)."""
     from agvsim.fleet.build import load_layout
     from agvsim.fleet.run import FleetRun
     from agvsim.scenario import ScenarioError, load_scenario
@@ -43,7 +47,12 @@ def fleet_command(
                 f"{len(layout.edges)} edges, {len(layout.stations)} stations)",
             )
             return 0
-        run = FleetRun(sc, broker)
+        if master:
+            from agvsim.master.mqtt import MasteredFleetRun
+
+            run: FleetRun = MasteredFleetRun(sc, broker, horizon_s=duration)
+        else:
+            run = FleetRun(sc, broker)
     except (ScenarioError, ValueError) as e:
         _say(err, f"error: {e}")
         return 2
@@ -75,6 +84,8 @@ def fleet_command(
                 f"  {v.cfg.serial:<10} {type(v.spec.model).__name__:<18} on "
                 f"{v.last_node.node_id if v.last_node else '-'}",
             )
+        if master:
+            _say(out, "master: agvsim's (dispatch, SIPP routes, reservations); --no-master: none")
         pace = "as fast as it can" if speed <= 0 else f"{speed:g}x real time"
         _say(out, f"running ({pace}); Ctrl-C stops")
         signal.signal(signal.SIGTERM, signal.default_int_handler)
@@ -85,3 +96,21 @@ def fleet_command(
         return 130
     finally:
         run.close()
+        if master:
+            _report(run, sc, out_dir or Path("runs/fleet") / scenario.stem, out)
+
+
+def _report(run: Any, sc: Any, out_dir: Path, out: Any) -> None:
+    from agvsim.master.report import waiting_heatmap, write_summary
+
+    m = run.master
+    t = float(run.fleet.sim.state.t_s)
+    s = m.metrics.summary(m, t)
+    write_summary(out_dir / "summary.json", sc.name, run.fleet.sim.seed, s)
+    waiting_heatmap(out_dir / "waiting.png", m.layout, s["waiting_s_by_node"], sc.name)
+    _say(
+        out,
+        f"{s['orders_completed']} orders completed in {t:.0f} s ({s['orders_per_hour']:g}/h), "
+        f"collisions {s['collisions']}, deadlocks {s['deadlocks']}; "
+        f"outputs: {out_dir}/summary.json, waiting.png",
+    )

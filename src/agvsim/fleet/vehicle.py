@@ -116,6 +116,7 @@ class Vehicle:
         self.errors: list[tuple[str, dict]] = []  # (scope: order|instant|run, error json)
         self.loads: list[dict] = []
         self.paused = self.driving = self.field_violation = False
+        self.broken = False  # a scheduled breakdown (``break_down``): stopped for good
         self.twist: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.pose = np.array(spec.initial_pose, dtype=np.float64)
         self.t_s = 0.0
@@ -518,7 +519,7 @@ class Vehicle:
     def _drive(self) -> tuple[float, float, float]:
         stop = (0.0, 0.0, 0.0)
         schedule(self.here, self._start)
-        if self.paused or self.battery.charging or drive_blocked(self.here):
+        if self.paused or self.broken or self.battery.charging or drive_blocked(self.here):
             return stop
         if self.battery.empty:
             if not any(e[0] == "run" for e in self.errors):
@@ -603,6 +604,13 @@ class Vehicle:
         if not any(e[0] == "fault" for e in self.errors):
             self._error("fault", Problem.INTERNAL, f"{type(exc).__name__}: {exc}", {})
         self.twist, self.driving, self.leg = (0.0, 0.0, 0.0), False, None
+        self._publish_due()
+
+    def break_down(self, description: str = "breakdown") -> None:
+        """A failure the scenario schedules: the vehicle stops for good and reports a FATAL
+        error (internalError / INTERNAL_ERROR) in its state."""
+        self.broken = True
+        self._error("fault", Problem.INTERNAL, description, {})
         self._publish_due()
 
     def drain(self) -> list[tuple[str, dict, bool]]:

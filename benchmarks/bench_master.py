@@ -1,0 +1,190 @@
+"""The master control at scale: a generated warehouse of thousands of nodes, N vehicles parked
+on spurs off its roads, transport orders at a rate per vehicle, run in-process (the same
+master, no broker) and, with ``--mqtt``, over Mosquitto (one client per vehicle plus the
+master's).
+
+Run ``python benchmarks/bench_master.py [--vehicles 1000] [--seconds 60] [--mqtt]``.
+The vehicles carry no lidar (no protective field): what is measured is the master and the
+VDA 5050 vehicles, not ray casting (benchmarks/bench_rays.py). Prints the layout's size and
+how long its LIF file takes to write and load, the build time, the simulated-to-wall time
+factor, the master's planning time per route (mean, 95th percentile, max) and the orders done.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from agvsim.master.run import InProcessRun
+from agvsim.scenario import parse_scenario
+from agvsim.world.lif import Edge, EdgeProps, Layout, Node, NodeProps, Station, load_lif, save_lif
+
+TYPE = "agvsim.differential"
+SPACING_M = 2.0
+
+
+def big_warehouse(cols: int, rows: int) -> Layout:
+    """A road grid (``cols`` x ``rows`` nodes, 2 m apart, both ways, 1 m/s) with a parking spur
+    beside every other node of every other road, and stations on the rest of those roads."""
+    nodes: dict[str, Node] = {}
+    edges: dict[str, Edge] = {}
+    stations: dict[str, Station] = {}
+    load = tuple(
+        {"actionType": k, "blockingType": "HARD", "requirementType": "OPTIONAL"}
+        for k in ("pick", "drop")
+    )
+
+    def node(nid: str, x: float, y: float, actions: tuple = ()) -> None:
+        nodes[nid] = Node(nid, x, y, {TYPE: NodeProps(None, actions)})
+
+    def both(a: str, b: str, v: float) -> None:
+        for s, e in ((a, b), (b, a)):
+            edges[f"{s}-{e}"] = Edge(f"{s}-{e}", s, e, {TYPE: EdgeProps(True, v)})
+
+    for j in range(rows):
+        for i in range(cols):
+            station = j % 2 == 0 and i % 2 == 1
+            node(f"n{i}_{j}", i * SPACING_M, j * SPACING_M, load if station else ())
+            if station:
+                stations[f"s{i}_{j}"] = Station(f"s{i}_{j}", (f"n{i}_{j}",))
+            if i:
+                both(f"n{i - 1}_{j}", f"n{i}_{j}", 1.0)
+            if j:
+                both(f"n{i}_{j - 1}", f"n{i}_{j}", 1.0)
+            if i % 2 == 0 and j % 2 == 0 and i + 1 < cols and j + 1 < rows:
+                node(f"p{i}_{j}", i * SPACING_M + 1.0, j * SPACING_M + 1.0)
+                both(f"n{i}_{j}", f"p{i}_{j}", 0.5)
+    return Layout("big", nodes, edges, stations, "generated warehouse")
+
+
+def scenario(folder: Path, lay: Layout, n: int, seconds: float, rate_per_vehicle_h: float) -> dict:
+    xs = [nd.x_m for nd in lay.nodes.values()]
+    ys = [nd.y_m for nd in lay.nodes.values()]
+    w, h = int(max(xs)) + 4, int(max(ys)) + 4  # 1 m cells
+    picture = "\n".join(["#" * w] + ["#" + "." * (w - 2) + "#"] * (h - 2) + ["#" * w])
+    homes = sorted((k for k in lay.nodes if k.startswith("p")), key=lambda k: lay.node_xy(k))[:n]
+    if len(homes) < n:
+        raise SystemExit(f"{len(homes)} parking spurs for {n} vehicles: make the layout larger")
+    robots = [
+        {
+            "name": f"v{k:04d}",
+            "model": "differential",
+            "params": {"wheel_radius_m": 0.1, "half_track_m": 0.22},
+            "body": {"length_m": 0.6, "width_m": 0.45},
+            "pose": {"x_m": lay.node_xy(p)[0] + 1.0, "y_m": lay.node_xy(p)[1] + 1.0},
+        }
+        for k, p in enumerate(homes)
+    ]
+    return {
+        "name": f"bench {n} vehicles",
+        "seed": 0,
+        "dt_s": 0.1,
+        "duration_s": seconds,
+        # the hall's lower-left corner 2 m beyond the layout's
+        "world": {"cell_size_m": 1.0, "picture": picture, "origin_xy_m": [-2.0, -2.0]},
+        "layout": {"file": "big.lif.json"},
+        "robots": robots,
+        "vda5050": {
+            "visualization_period_s": 0,
+            "vehicles": [
+                {"robot": r["name"], "start_node": p} for r, p in zip(robots, homes, strict=True)
+            ],
+        },
+        "master": {"generate": {"rate_per_h": rate_per_vehicle_h * n}},
+    }
+
+
+def bench(n: int, seconds: float, cols: int, rows: int, rate: float, mqtt: bool) -> dict:
+    out: dict = {"vehicles": n}
+    lay = big_warehouse(cols, rows)
+    folder = Path(tempfile.mkdtemp(prefix="agvsim-bench-master-"))
+    t0 = time.perf_counter()
+    save_lif(folder / "big.lif.json", [lay])
+    t1 = time.perf_counter()
+    load_lif(folder / "big.lif.json")
+    t2 = time.perf_counter()
+    out |= {
+        "layout_nodes": len(lay.nodes),
+        "layout_edges": len(lay.edges),
+        "lif_write_s": round(t1 - t0, 3),
+        "lif_load_s": round(t2 - t1, 3),
+    }
+    sc = parse_scenario(scenario(folder, lay, n, seconds, rate), "bench")
+    sc._base_dir = folder
+    t0 = time.perf_counter()
+    run = InProcessRun(sc, master_period_s=0.5)
+    run.step()
+    out["build_s"] = round(time.perf_counter() - t0, 2)
+    t0 = time.perf_counter()
+    run.run()
+    wall = time.perf_counter() - t0
+    plans = np.array(run.master.plan_times_s) * 1000
+    s = run.summary()
+    out |= {
+        "in_process_real_time_factor": round(run.t_s / wall, 3),
+        "plan_ms_mean": round(float(plans.mean()), 2) if plans.size else None,
+        "plan_ms_p95": round(float(np.percentile(plans, 95)), 2) if plans.size else None,
+        "plan_ms_max": round(float(plans.max()), 2) if plans.size else None,
+        "routes_planned": int(plans.size),
+        "orders_completed": s["orders_completed"],
+        "orders_placed": s["orders_placed"],
+        "collisions": s["collisions"],
+        "deadlocks": s["deadlocks"],
+    }
+    if mqtt:
+        out |= bench_mqtt(sc, seconds)
+    shutil.rmtree(folder, ignore_errors=True)
+    return out
+
+
+def bench_mqtt(sc, seconds: float) -> dict:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from fleet_helpers import Mosquitto
+
+    from agvsim.master.mqtt import MasteredFleetRun
+
+    mosq = Mosquitto().start()
+    try:
+        run = MasteredFleetRun(sc, f"mqtt://127.0.0.1:{mosq.port}", master_period_s=0.5)
+        t0 = time.perf_counter()
+        online = run.connect(60.0)
+        connect_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        run.run(seconds, speed=0)
+        wall = time.perf_counter() - t0
+        m = run.master
+        s = m.metrics.summary(m, float(run.fleet.sim.state.t_s))
+        run.close()
+    finally:
+        mosq.stop()
+    return {
+        "mqtt_online": online,
+        "mqtt_connect_s": round(connect_s, 2),
+        "mqtt_real_time_factor": round(seconds / wall, 3),
+        "mqtt_orders_completed": s["orders_completed"],
+        "mqtt_collisions": s["collisions"],
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--vehicles", type=int, default=1000)
+    ap.add_argument("--seconds", type=float, default=60.0, help="simulated seconds")
+    ap.add_argument("--cols", type=int, default=80, help="road nodes across")
+    ap.add_argument("--rows", type=int, default=50, help="road nodes down")
+    ap.add_argument("--rate", type=float, default=20.0, help="orders per vehicle per hour")
+    ap.add_argument("--mqtt", action="store_true", help="also over Mosquitto")
+    a = ap.parse_args()
+    print(json.dumps(bench(a.vehicles, a.seconds, a.cols, a.rows, a.rate, a.mqtt), indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,2 @@
+"""The master control: transport orders, dispatching, routing and traffic control over VDA 5050
+(docs/master.md)."""

@@ -1,0 +1,113 @@
+"""What the master knows of one vehicle, and the VDA 5050 messages it sends it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from agvsim.fleet.messages import Stamper
+from agvsim.master.graph import RoadGraph
+from agvsim.master.orders import Transport
+from agvsim.master.traffic import Step, Stop, Visit
+from agvsim.world.lif import Layout
+
+ENDED = ("FINISHED", "FAILED")
+
+
+@dataclass
+class Agv:
+    """What the master knows of one vehicle."""
+
+    serial: str
+    manufacturer: str
+    version: str
+    stamp: Stamper
+    vehicle_type: str | None = None
+    speed_m_s: float = 1.0
+    home: str | None = None
+    map_id: str = "map"
+    state: dict | None = None
+    broken: bool = False
+    # the route: steps, their visits (None once released), what is granted and sent
+    route: list[Step] = field(default_factory=list)
+    visits: list[Visit | None] = field(default_factory=list)
+    granted: int = 0
+    sent: int = -1  # index of the last node sent as released (-1: nothing sent)
+    reached: int = 0
+    order_id: str = ""
+    update_id: int = 0
+    order_done: bool = True
+    changed: bool = False  # the horizon changed since the last message
+    actions: dict[int, list[dict]] = field(default_factory=dict)  # route index -> actions
+    stops: list[tuple[Stop, int]] = field(default_factory=list)  # stop, route index
+    job: str = "idle"  # idle | transport | home | charge | charging
+    transport: Transport | None = None
+    charger: str | None = None
+    stop_charging_sent: bool = False
+    orders_sent: int = 0
+    progress: tuple = ()  # what changes while the vehicle gets on with its order
+    progress_s: float = 0.0  # when it last changed
+    stalled: bool = False
+    replan: bool = False  # its route crosses a broken vehicle: re-plan as soon as one fits
+    retimed_s: float = -1e9  # when it was last re-planned for being late
+
+    @property
+    def battery_pct(self) -> float:
+        bs = (self.state or {}).get("batteryState") or (self.state or {}).get("powerSupply") or {}
+        return float(bs.get("batteryCharge", bs.get("stateOfCharge", 100.0)))
+
+    @property
+    def charging(self) -> bool:
+        bs = (self.state or {}).get("batteryState") or (self.state or {}).get("powerSupply") or {}
+        return bool(bs.get("charging", False))
+
+    @property
+    def decision_node(self) -> str:
+        return self.route[self.granted].node
+
+
+def action(aid: str, kind: str, blocking: str = "HARD", **params: str) -> dict:
+    a: dict[str, Any] = {"actionId": aid, "actionType": kind, "blockingType": blocking}
+    if params:
+        a["actionParameters"] = [{"key": k, "value": v} for k, v in params.items()]
+    return a
+
+
+def order_message(agv: Agv, layout: Layout, g: RoadGraph, t_s: float) -> dict:
+    """The order (or order update) that sends what is new: from the node the vehicle last
+    got as released (its decision point) to the end of the route, released up to what is
+    granted (base), the rest as the horizon."""
+    first = 0 if agv.sent < 0 else agv.sent
+    nodes, edges = [], []
+    for i in range(first, len(agv.route)):
+        n = agv.route[i].node
+        x, y = layout.node_xy(n)
+        nodes.append(
+            {
+                "nodeId": n,
+                "sequenceId": 2 * i,
+                "released": i <= agv.granted,
+                "nodePosition": {"x": x, "y": y, "mapId": agv.map_id},
+                "actions": agv.actions.get(i, []),
+            }
+        )
+        if i > first:
+            prev = agv.route[i - 1].node
+            edges.append(
+                {
+                    "edgeId": g.arc(prev, n).edge_id,
+                    "sequenceId": 2 * i - 1,
+                    "released": i <= agv.granted,
+                    "startNodeId": prev,
+                    "endNodeId": n,
+                    "actions": [],
+                }
+            )
+    if agv.sent >= 0:
+        agv.update_id += 1
+    return agv.stamp.header("order", t_s) | {
+        "orderId": agv.order_id,
+        "orderUpdateId": agv.update_id,
+        "nodes": nodes,
+        "edges": edges,
+    }

@@ -1,0 +1,467 @@
+"""The master control's logic: no I/O, no clock of its own.
+
+It learns the vehicles from what they publish (``factsheet``: vehicle type and top speed;
+``state``: where they stand, battery, errors, actions) and answers with ``order`` and
+``instantActions`` messages, as dicts in the vehicle's VDA 5050 version. ``receive(serial,
+topic, message)`` takes what a vehicle published; ``tick(t_s)`` decides and returns the
+messages to send as ``(serial, topic, message)``. The in-process runner and the MQTT client
+(``agvsim.master.run``, ``agvsim.master.mqtt``) feed the same object, so both paths share
+every decision.
+
+Each vehicle has one route at a time: node visits planned by SIPP in the reservation table
+(``agvsim.master.traffic``), sent as a base (the visits granted so far) plus a horizon (the
+rest, ``released: false``) and extended by order updates as the next visits are granted.
+A transport is one route: pick-up, drop-off, then back to the vehicle's home node (where it
+started). A vehicle on its way home can take the next transport: the route is re-planned
+from its decision point (the end of its base) and sent as an order update.
+"""
+
+from __future__ import annotations
+
+import time
+from datetime import UTC, datetime
+
+from agvsim.fleet.dialect import DIALECTS
+from agvsim.fleet.messages import Stamper
+from agvsim.master.agv import ENDED, Agv, action, order_message
+from agvsim.master.config import MasterConfig
+from agvsim.master.dispatch import POLICIES
+from agvsim.master.graph import RoadGraph
+from agvsim.master.metrics import Metrics
+from agvsim.master.orders import Transport
+from agvsim.master.traffic import INF, NoRoute, Reservations, Step, Stop, Visit, plan_route
+from agvsim.world.lif import Layout
+
+Message = tuple[str, str, dict]  # serial, topic, message
+PLANNED_DWELL_S = 3.0  # what a pick or a drop is planned to take (an estimate: order only)
+
+
+def wait_cycles(waits: dict[str, str]) -> list[frozenset[str]]:
+    """The cycles of a wait-for graph in which each vehicle waits for at most one other."""
+    found: list[frozenset[str]] = []
+    for s in sorted(waits):
+        seen, cur = [s], waits.get(s)
+        while cur is not None and cur not in seen:
+            seen.append(cur)
+            cur = waits.get(cur)
+        if cur is not None:
+            cycle = frozenset(seen[seen.index(cur) :])
+            if cycle not in found:
+                found.append(cycle)
+    return found
+
+
+class Master:
+    def __init__(
+        self,
+        layout: Layout,
+        cfg: MasterConfig,
+        transports: list[Transport] | None = None,
+        epoch: datetime | None = None,
+    ):
+        self.layout, self.cfg = layout, cfg
+        self.epoch = epoch or datetime(2026, 1, 1, tzinfo=UTC)
+        self.table = Reservations(cfg.margin_s)
+        self.policy = POLICIES[cfg.dispatch]
+        self.agvs: dict[str, Agv] = {}
+        self._graphs: dict[tuple[str | None, float], RoadGraph] = {}
+        self.upcoming = sorted(transports or [], key=lambda x: (x.created_s, x.transport_id))
+        self.pending: list[Transport] = []
+        self.transports: list[Transport] = list(self.upcoming)
+        self.metrics = Metrics()
+        self.t_s = 0.0
+        self.plan_times_s: list[float] = []
+        self.replan_failures = 0
+        self._deadlocks_seen: set[frozenset[str]] = set()
+
+    # ------------------------------------------------------------------ input
+    def receive(self, serial: str, topic: str, msg: dict) -> None:
+        agv = self.agvs.get(serial)
+        if agv is None:
+            if topic not in ("state", "factsheet"):
+                return
+            version = str(msg.get("version", "2.1.0"))
+            dialect = DIALECTS.get(version) or DIALECTS["2.1.0"]
+            agv = Agv(
+                serial,
+                str(msg.get("manufacturer", "")),
+                dialect.version,
+                Stamper(dialect, str(msg.get("manufacturer", "")), serial, self.epoch),
+            )
+            self.agvs = dict(sorted({**self.agvs, serial: agv}.items()))
+        if topic == "factsheet":
+            ts = msg.get("typeSpecification", {})
+            agv.vehicle_type = ts.get("seriesName")
+            agv.speed_m_s = float(msg.get("physicalParameters", {}).get("speedMax", 1.0))
+        elif topic == "state":
+            agv.state = msg
+            pos = msg.get("agvPosition") or msg.get("mobileRobotPosition") or {}
+            agv.map_id = str(pos.get("mapId", agv.map_id))
+            node = msg.get("lastNodeId", "")
+            if agv.home is None and node in self.layout.nodes:
+                agv.home = node
+                agv.route = [Step(node, self.t_s, INF)]
+                v = Visit(serial, node, 0, self.t_s, INF, granted=True)
+                agv.visits = [v]
+                self.table.add(v)
+
+    # ------------------------------------------------------------------ helpers
+    def graph(self, agv: Agv) -> RoadGraph:
+        key = (agv.vehicle_type, agv.speed_m_s)
+        if key not in self._graphs:
+            types = self.layout.vehicle_types
+            vt = agv.vehicle_type if agv.vehicle_type in types else None
+            self._graphs[key] = RoadGraph(self.layout, vt, agv.speed_m_s)
+        return self._graphs[key]
+
+    def static_time(self, agv: Agv, a: str, b: str) -> float:
+        return self.graph(agv).times_to(b).get(a, INF)
+
+    def _ready(self, agv: Agv) -> bool:
+        return agv.home is not None and agv.vehicle_type is not None and agv.state is not None
+
+    def chargers(self, agv: Agv) -> list[str]:
+        out = []
+        for nid, n in sorted(self.layout.nodes.items()):
+            props = n.types.get(agv.vehicle_type or "") or next(iter(n.types.values()), None)
+            if props and any(a.get("actionType") == "startCharging" for a in props.actions):
+                out.append(nid)
+        return out
+
+    # ------------------------------------------------------------------ routes
+    def assign(self, agv: Agv, stops: list[tuple[Stop, list[dict]]], t_s: float) -> bool:
+        """Plan a new route through ``stops`` from the vehicle's decision point: a new order
+        when it has none running, else an update of the running one. False: no route now."""
+        fresh = agv.order_done
+        g = 0 if fresh else agv.granted
+        start = agv.route[-1] if fresh else agv.route[g]
+        old = [v for v in (agv.visits[-1:] if fresh else agv.visits[g:]) if v is not None]
+        held = old[0].start_s if old else t_s
+        for v in old:
+            self.table.remove(v)
+        t0 = max(t_s, start.arrive_s)
+        w0 = time.perf_counter()
+        try:
+            steps = plan_route(
+                self.graph(agv),
+                self.table,
+                agv.serial,
+                start.node,
+                t0,
+                [s for s, _ in stops],
+                held_since_s=held,
+                stop_at_start=fresh,
+                avoid=frozenset(
+                    a.home for a in self.agvs.values() if a is not agv and a.home is not None
+                ),
+            )
+        except NoRoute:
+            for v in old:
+                self.table.add(v)
+            return False
+        finally:
+            self.plan_times_s.append(time.perf_counter() - w0)
+        keep = [] if fresh else agv.route[:g]
+        visits: list[Visit | None] = [] if fresh else agv.visits[:g]
+        for k, s in enumerate(steps):
+            begin = held if k == 0 else steps[k - 1].depart_s
+            end = steps[k + 1].arrive_s if k + 1 < len(steps) else INF
+            v = Visit(agv.serial, s.node, g + k, begin, end, granted=k == 0)
+            visits.append(v)
+            self.table.add(v)
+        if not fresh:
+            steps[0].arrive_s = start.arrive_s
+        agv.route, agv.visits = keep + steps, visits
+        agv.actions = {i: a for i, a in agv.actions.items() if i <= g} if not fresh else {}
+        agv.stops = [(st, i) for st, i in agv.stops if i <= g] if not fresh else []
+        for k, s in enumerate(steps):
+            if s.stop is not None:
+                stop, acts = stops[s.stop]
+                agv.actions.setdefault(g + k, []).extend(acts)
+                agv.stops.append((stop, g + k))
+        if fresh:
+            agv.orders_sent += 1
+            agv.order_id = f"{agv.serial}-{agv.orders_sent:05d}"
+            agv.update_id, agv.granted, agv.sent, agv.reached = 0, 0, -1, 0
+            agv.order_done = False
+        agv.changed = True
+        return True
+
+    def _remaining_stops(self, agv: Agv) -> list[tuple[Stop, list[dict]]]:
+        return [(st, agv.actions.get(i, [])) for st, i in agv.stops if i > agv.granted]
+
+    def _grant(self, agv: Agv) -> None:
+        while agv.granted + 1 < len(agv.route):
+            v = agv.visits[agv.granted + 1]
+            if v is None or self.table.first(v.node) is not v:
+                break
+            v.granted = True
+            agv.granted += 1
+
+    # ------------------------------------------------------------------ per vehicle
+    def _progress(self, agv: Agv, t_s: float, out: list[Message]) -> None:
+        st = agv.state
+        if st is None:
+            return
+        fatal = [e for e in st.get("errors", []) if e.get("errorLevel") == "FATAL"]
+        if fatal and not agv.broken:
+            self.breakdown(agv, t_s)
+            return
+        if agv.broken or st.get("orderId") != agv.order_id or agv.order_done:
+            return
+        if agv.sent < 0:
+            return
+        reached = int(st.get("lastNodeSequenceId", 0)) // 2
+        if st.get("lastNodeId") != agv.route[min(reached, len(agv.route) - 1)].node:
+            return
+        agv.reached = max(agv.reached, reached)
+        for i in range(agv.reached):
+            v = agv.visits[i]
+            if v is not None:
+                self.table.remove(v)
+                agv.visits[i] = None
+        status = {a["actionId"]: a["actionStatus"] for a in st.get("actionStates", [])}
+        tr = agv.transport
+        if tr is not None:
+            if tr.picked_s is None and status.get(f"{tr.transport_id}-pick-{tr.attempts}") in ENDED:
+                tr.picked_s = t_s
+            drop = status.get(f"{tr.transport_id}-drop-{tr.attempts}")
+            if tr.picked_s is not None and drop in ENDED:
+                tr.delivered_s = t_s
+                self.metrics.delivered(tr)
+                agv.transport, agv.job = None, "home"
+                if agv.battery_pct < self.cfg.charging.low_pct:
+                    self._send_to_charger(agv, t_s)
+        all_ended = all(s in ENDED for s in status.values())
+        if (
+            agv.reached == len(agv.route) - 1
+            and agv.granted == agv.reached
+            and not st.get("nodeStates")
+            and all_ended
+        ):
+            agv.order_done = True
+            if agv.job == "charge":
+                agv.job = "charging"
+            elif agv.job == "home":
+                agv.job = "idle"
+
+    def _send_to_charger(self, agv: Agv, t_s: float) -> bool:
+        taken = {a.charger for a in self.agvs.values() if a is not agv and a.charger}
+        free = [c for c in self.chargers(agv) if c not in taken]
+        if not free:
+            return False
+        here = agv.route[-1 if agv.order_done else agv.granted].node
+        free.sort(key=lambda c: (self.static_time(agv, here, c), c))
+        for c in free:
+            acts = [action(f"{agv.serial}-charge-{agv.orders_sent}-{c}", "startCharging")]
+            if self.assign(agv, [(Stop(c), acts)], t_s):
+                agv.job, agv.charger, agv.stop_charging_sent = "charge", c, False
+                return True
+        return False
+
+    def breakdown(self, agv: Agv, t_s: float) -> None:
+        """A vehicle reports FATAL: it keeps the node it stands on (and the one it was driving
+        to) for good, its transport goes back to the queue, and every vehicle that was to
+        pass those nodes later is re-planned around them."""
+        agv.broken = True
+        self.metrics.breakdowns += 1
+        hold = {agv.reached} | ({agv.reached + 1} if agv.granted > agv.reached else set())
+        blocked = set()
+        for i, v in enumerate(agv.visits):
+            if v is None:
+                continue
+            if i in hold:
+                v.end_s = INF
+                blocked.add(v.node)
+            else:
+                self.table.remove(v)
+                agv.visits[i] = None
+        if agv.order_done and agv.visits and agv.visits[-1] is not None:
+            blocked.add(agv.visits[-1].node)
+        tr = agv.transport
+        if tr is not None:
+            tr.vehicle, tr.picked_s, tr.assigned_s = None, None, None
+            tr.attempts += 1
+            self.pending.insert(0, tr)
+            agv.transport = None
+        agv.job, agv.charger = "broken", None
+        for other in self.agvs.values():
+            if other is agv or other.broken or other.order_done:
+                continue
+            ahead = [v for v in other.visits[other.granted + 1 :] if v is not None]
+            if any(v.node in blocked for v in ahead):
+                if not self.assign(other, self._remaining_stops(other), t_s):
+                    self.replan_failures += 1
+                    other.replan = True
+
+    # ------------------------------------------------------------------ the tick
+    def tick(self, t_s: float) -> list[Message]:
+        dt = max(0.0, t_s - self.t_s)
+        self.t_s = t_s
+        out: list[Message] = []
+        while self.upcoming and self.upcoming[0].created_s <= t_s:
+            self.pending.append(self.upcoming.pop(0))
+        for agv in self.agvs.values():
+            if self._ready(agv):
+                self._progress(agv, t_s, out)
+        self._charging(t_s, out)
+        for agv in self.agvs.values():
+            if agv.replan and not agv.broken and not agv.order_done:
+                agv.replan = not self.assign(agv, self._remaining_stops(agv), t_s)
+            elif self._late(agv, t_s):
+                agv.retimed_s = t_s
+                if self.assign(agv, self._remaining_stops(agv), t_s):
+                    self.metrics.retimed += 1
+        self._dispatch(t_s)
+        for agv in self.agvs.values():
+            if not self._ready(agv) or agv.broken or agv.order_done and not agv.changed:
+                continue
+            self._grant(agv)
+            if agv.granted > agv.sent or agv.changed:
+                out.append(
+                    (agv.serial, "order", order_message(agv, self.layout, self.graph(agv), t_s))
+                )
+                agv.sent, agv.changed = agv.granted, False
+        self.metrics.step(self, dt)
+        self._detect_deadlocks()
+        self._detect_stalls(t_s)
+        return out
+
+    def _late(self, agv: Agv, t_s: float) -> bool:
+        """Behind its plan by ``late_s`` (at the next node), with a part not yet granted, and
+        not re-planned for that in the last ``late_s``. Re-planning it moves its pending
+        visits after everyone else's: vehicles queued behind them go first (the planned
+        order stays consistent, so the dependency graph stays acyclic)."""
+        if agv.order_done or agv.broken or agv.state is None or not self._ready(agv):
+            return False
+        if agv.granted + 1 >= len(agv.route) or t_s - agv.retimed_s < self.cfg.late_s:
+            return False
+        nxt = agv.route[min(agv.reached + 1, len(agv.route) - 1)]
+        return t_s - nxt.arrive_s > self.cfg.late_s
+
+    def _detect_stalls(self, t_s: float) -> None:
+        """A vehicle with an order that has neither passed a node, nor finished an action,
+        nor been sent anything for ``stall_s``: counted once (it must never happen)."""
+        for a in self.agvs.values():
+            st = a.state or {}
+            key = (
+                st.get("lastNodeSequenceId"),
+                a.order_id,
+                a.update_id,
+                sum(x.get("actionStatus") in ENDED for x in st.get("actionStates", [])),
+                a.job,
+            )
+            if key != a.progress or a.order_done or a.broken or a.job == "charging":
+                a.progress, a.progress_s, a.stalled = key, t_s, False
+            elif t_s - a.progress_s > self.cfg.stall_s and not a.stalled:
+                a.stalled = True
+                self.metrics.stalls += 1
+
+    def _charging(self, t_s: float, out: list[Message]) -> None:
+        low, full = self.cfg.charging.low_pct, self.cfg.charging.full_pct
+        for agv in self.agvs.values():
+            if not self._ready(agv) or agv.broken:
+                continue
+            if agv.job == "charging" and agv.charging and agv.battery_pct >= full:
+                if not agv.stop_charging_sent:
+                    msg = agv.stamp.header("instantActions", t_s) | {
+                        "actions": [
+                            action(
+                                f"{agv.serial}-stopcharge-{agv.orders_sent}", "stopCharging", "NONE"
+                            )
+                        ]
+                    }
+                    out.append((agv.serial, "instantActions", msg))
+                    agv.stop_charging_sent = True
+            elif agv.job == "charging" and agv.stop_charging_sent and not agv.charging:
+                if self.assign(agv, [(Stop(agv.home or ""), [])], t_s):
+                    agv.job, agv.charger = "home", None
+            elif agv.job == "idle" and agv.battery_pct < low:
+                self._send_to_charger(agv, t_s)
+
+    def available(self) -> list[str]:
+        low = self.cfg.charging.low_pct
+        return [
+            a.serial
+            for a in self.agvs.values()
+            if self._ready(a)
+            and not a.broken
+            and a.job in ("idle", "home")
+            and a.battery_pct >= low
+            and not a.charging
+        ]
+
+    def _dispatch(self, t_s: float) -> None:
+        if not self.pending:
+            return
+        free = self.available()
+        left: list[Transport] = []
+        for tr in self.pending:
+            if not free:
+                left.append(tr)
+                continue
+
+            def cost(serial: str, node: str) -> float:
+                a = self.agvs[serial]
+                here = a.route[-1 if a.order_done else a.granted].node
+                return self.static_time(a, here, node)
+
+            serial = self.policy(tr, free, cost)
+            agv = self.agvs.get(serial) if serial else None
+            if agv is None:
+                left.append(tr)
+                continue
+            n = tr.attempts
+            stops = [
+                (
+                    Stop(tr.source, PLANNED_DWELL_S),
+                    [action(f"{tr.transport_id}-pick-{n}", "pick", loadId=tr.transport_id)],
+                ),
+                (
+                    Stop(tr.destination, PLANNED_DWELL_S),
+                    [action(f"{tr.transport_id}-drop-{n}", "drop")],
+                ),
+                (Stop(agv.home or ""), []),
+            ]
+            if self.assign(agv, stops, t_s):
+                tr.vehicle, tr.assigned_s = agv.serial, t_s
+                agv.transport, agv.job = tr, "transport"
+                free.remove(agv.serial)
+            else:
+                left.append(tr)
+        self.pending = left
+
+    def _detect_deadlocks(self) -> None:
+        """Vehicles stopped at the end of their base, each waiting for a node whose first
+        visit belongs to another: a cycle among them is a deadlock, counted once."""
+        waits: dict[str, str] = {}
+        for a in self.agvs.values():
+            if a.order_done or a.broken or a.granted + 1 >= len(a.route):
+                continue
+            if a.reached != a.granted:
+                continue
+            v = a.visits[a.granted + 1]
+            head = self.table.first(v.node) if v is not None else None
+            if head is not None and head.serial != a.serial:
+                waits[a.serial] = head.serial
+        for cycle in wait_cycles(waits):
+            if cycle not in self._deadlocks_seen:
+                self._deadlocks_seen.add(cycle)
+                self.metrics.deadlocks += 1
+
+    @property
+    def all_delivered(self) -> bool:
+        return (
+            not self.upcoming
+            and not self.pending
+            and all(t.delivered_s is not None for t in self.transports)
+        )
+
+    def waiting(self, agv: Agv) -> bool:
+        return (
+            not agv.order_done
+            and not agv.broken
+            and agv.reached == agv.granted
+            and agv.granted + 1 < len(agv.route)
+            and not bool((agv.state or {}).get("driving"))
+        )
