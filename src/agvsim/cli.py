@@ -61,19 +61,38 @@ def serve(
         float,
         typer.Option(help="Most MB a file sent from the browser may have.", min=0.001, max=4096),
     ] = 10.0,
+    broker: Annotated[
+        str | None,
+        typer.Option(
+            help="MQTT broker of a scenario's VDA 5050 vehicles, mqtt://HOST:PORT "
+            "(default: an embedded one on 127.0.0.1)."
+        ),
+    ] = None,
 ) -> None:
     """Open the browser app: 3D view, the robot mask, run controls, video, maze editor,
-    plots. Only a browser that opens the printed address (with its token) gets in."""
+    plots. Only a browser that opens the printed address (with its token) gets in. A
+    scenario with a vda5050: block runs its robots as VDA 5050 vehicles on MQTT."""
     from agvsim.scenario import ScenarioError
 
     try:
+        from agvsim.app.fleet_view import BrokerError
         from agvsim.app.server import serve as serve_app
     except ImportError as e:  # pragma: no cover - viser is a dependency
         _fail("error", f"the browser app needs viser ({e}); pip install viser")
         raise typer.Exit(1) from None
+    from agvsim.fleet.transport import BrokerAddress
+
+    if broker is not None:
+        try:
+            BrokerAddress.parse(broker)
+        except ValueError as e:
+            _fail("error", e)
+            raise typer.Exit(2) from None
 
     def ready(a) -> None:
         out.print(f"agvsim app on [bold]{a.url}[/bold]  (Ctrl-C stops it)", soft_wrap=True)
+        for line in getattr(a.session, "banner", list)():  # a VDA 5050 fleet: broker, topics
+            out.print(line, markup=False, highlight=False, soft_wrap=True)
         if host not in ("127.0.0.1", "localhost", "::1"):
             err.print(
                 f"warning: listening on {host}: anyone on your network can open it", style="yellow"
@@ -93,10 +112,14 @@ def serve(
             out_dir=out_dir,
             notify=lambda m: out.print(m, markup=False, highlight=False),
             max_upload_bytes=int(max_upload_mb * 2**20),
+            broker=broker,
         )
     except ScenarioError as e:
         _fail("error", e)
         raise typer.Exit(2) from None
+    except BrokerError as e:
+        _fail("error", e)
+        raise typer.Exit(1) from None
     except OSError as e:
         _fail("error", f"cannot listen on {host}:{port}: {e}")
         raise typer.Exit(1) from None

@@ -4,8 +4,8 @@ One ``SceneView`` keeps the viewer in step with a ``Session``: the floor and the
 merged mesh, rebuilt only when the maze changes), each robot as its model (body, wheels at
 their real positions turning with their rotation and steering angles, Mecanum rollers), the
 sensor beams in the thesis's colours (green rangers, blue lidar) with their hit points, trails,
-the world's vision markers (ArUco, AprilTag, QR codes, colour patches) on their wall faces, and
-an optional map overlay.
+the world's vision markers (ArUco, AprilTag, QR codes, colour patches) on their wall faces, the
+scenario's ``layout:`` (nodes, edges, stations; app.fleet_view) and an optional map overlay.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import viser
 
-from agvsim.app import shapes
+from agvsim.app import fleet_view, shapes
 from agvsim.app.session import Session
 from agvsim.sim.spec import BODY_HEIGHT_M, WALL_HEIGHT_M
 from agvsim.world.grid import OccupancyGrid
@@ -68,6 +68,7 @@ class SceneView:
         self._trails: Any = None
         self._overlay_node: Any = None
         self._markers: list[Any] = []
+        self._layout_nodes: list[Any] = []  # the scenario's layout: nodes, edges, stations
         self._frame = 0
         self.frames_sent = 0
         server.scene.set_up_direction("+z")
@@ -105,6 +106,7 @@ class SceneView:
             sc.add_frame("/walls", show_axes=False)  # replaces an old mesh
         self._draw_markers(markers)
         self._draw_overlay()
+        self._layout_nodes = fleet_view.draw_session_layout(sc, self.session, self._layout_nodes)
 
     def _draw_markers(self, markers: tuple[Marker, ...]) -> None:
         """Each marker as an image (its texture, quiet zone included) just in front of its

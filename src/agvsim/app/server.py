@@ -18,7 +18,7 @@ from typing import Protocol, TypeVar
 
 from agvsim.app.session import DEFAULT_OUT, Session
 from agvsim.app.uploads import DEFAULT_MAX_UPLOAD_BYTES, UploadLimits, refuse_large_uploads
-from agvsim.scenario import Scenario, load_scenario
+from agvsim.scenario import Scenario, ScenarioError, load_scenario
 from agvsim.signals import terminate_as_interrupt
 
 log = logging.getLogger("agvsim.app")
@@ -151,6 +151,7 @@ class App:
             saved = ", ".join(str(p) for p in paths)
             self.notify(f"video saved ({status[2]:.1f} s): {saved}")
         self.server.stop()
+        self.session.close()  # a VDA 5050 fleet: OFFLINE, the embedded broker stops
 
     def frame_rate(self, window_s: float = 2.0) -> float:
         """Frames drawn per second over the last ``window_s`` seconds."""
@@ -161,8 +162,23 @@ class App:
 
 
 def open_session(
-    scenario: str | Path | Scenario | None, out_dir: str | Path = DEFAULT_OUT
+    scenario: str | Path | Scenario | None,
+    out_dir: str | Path = DEFAULT_OUT,
+    broker: str | None = None,
 ) -> Session:
+    """The session of ``scenario``: a ``FleetSession`` (app.fleet_view) when it has a
+    ``vda5050:`` block, its vehicles on ``broker`` (None: an embedded broker)."""
+    if scenario is not None and not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    if isinstance(scenario, Scenario) and scenario.vda5050 is not None:
+        from agvsim.app.fleet_view import FleetSession
+
+        return FleetSession(scenario, scenario._source, broker_url=broker, out_dir=out_dir)
+    if broker is not None:
+        raise ScenarioError(
+            str(getattr(scenario, "_source", "scenario")),
+            ["--broker needs a scenario with a 'vda5050:' block of vehicles"],
+        )
     if scenario is None:
         from agvsim.scenario import parse_scenario
 
@@ -184,9 +200,7 @@ def open_session(
             }
         )
         return Session(sc, "built-in scenario", out_dir=out_dir)
-    if isinstance(scenario, Scenario):
-        return Session(scenario, out_dir=out_dir)
-    return Session(load_scenario(scenario), str(scenario), out_dir=out_dir)
+    return Session(scenario, scenario._source, out_dir=out_dir)
 
 
 def serve(
@@ -198,12 +212,18 @@ def serve(
     out_dir: str | Path = DEFAULT_OUT,
     notify: Callable[[str], None] = print,
     max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
+    broker: str | None = None,
 ) -> None:
     """Run the app until Ctrl-C (or SIGTERM); a video being recorded is finished first.
-    ``max_upload_bytes``: the most one file sent from a browser may have."""
-    session = open_session(scenario, out_dir)
+    ``max_upload_bytes``: the most one file sent from a browser may have. ``broker``: the
+    MQTT broker of a scenario's VDA 5050 vehicles (None: an embedded one)."""
+    session = open_session(scenario, out_dir, broker)
     session.upload_limits = UploadLimits(max_upload_bytes, max_unpacked_bytes=4 * max_upload_bytes)
-    app = App(session, host=host, port=port, notify=notify).start()
+    try:
+        app = App(session, host=host, port=port, notify=notify).start()
+    except BaseException:
+        session.close()
+        raise
     if play:
         app.session.play()
     run_until_stopped(app, on_ready)

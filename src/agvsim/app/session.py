@@ -210,6 +210,9 @@ class Session:
             self.layout += 1
             self._reset_history()
 
+    def close(self) -> None:
+        """Release what the session holds (app.fleet_view.FleetSession: its MQTT links)."""
+
     def _step_once(self) -> bool:
         self._feed_keyboard()
         try:

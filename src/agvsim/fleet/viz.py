@@ -57,21 +57,32 @@ def layout_geometry(layout: Layout, samples: int = 16) -> LayoutGeometry:
     )
 
 
-def draw_layout(scene: Any, layout: Layout, prefix: str = "/layout") -> None:
-    """Add the layout to a viser scene (names under ``prefix``; drawing again replaces it)."""
+def draw_layout(scene: Any, layout: Layout, prefix: str = "/layout") -> list[Any]:
+    """Add the layout to a viser scene (names under ``prefix``; drawing again replaces it).
+    Returns the scene handles added (remove them to take the layout away)."""
     g = layout_geometry(layout)
+    handles: list[Any] = []
     if len(g.segments):
-        scene.add_line_segments(
-            f"{prefix}/edges",
-            g.segments,
-            colors=EDGE_RGB,
-            thickness=2.0,
-            thickness_units="screen",
+        handles.append(
+            scene.add_line_segments(
+                f"{prefix}/edges",
+                g.segments,
+                colors=EDGE_RGB,
+                thickness=2.0,
+                thickness_units="screen",
+            )
         )
     if len(g.nodes):
-        scene.add_point_cloud(f"{prefix}/nodes", g.nodes, colors=NODE_RGB, point_size=0.08)
-    for k, (p, name) in enumerate(zip(g.stations, g.station_names, strict=True)):
-        scene.add_point_cloud(
-            f"{prefix}/stations/{k}", p[None, :], colors=STATION_RGB, point_size=0.2
+        handles.append(
+            scene.add_point_cloud(f"{prefix}/nodes", g.nodes, colors=NODE_RGB, point_size=0.08)
         )
-        scene.add_label(f"{prefix}/stations/{k}/label", name, position=tuple(p + (0, 0, 0.3)))
+    for k, (p, name) in enumerate(zip(g.stations, g.station_names, strict=True)):
+        handles.append(
+            scene.add_point_cloud(
+                f"{prefix}/stations/{k}", p[None, :], colors=STATION_RGB, point_size=0.2
+            )
+        )
+        handles.append(
+            scene.add_label(f"{prefix}/stations/{k}/label", name, position=tuple(p + (0, 0, 0.3)))
+        )
+    return handles
