@@ -23,14 +23,14 @@ def test_a_vda5050_scenario_served_by_the_app_takes_orders_over_mqtt(tmp_path: P
     from agvsim.app.server import open_session
 
     path = room_scenario(tmp_path, [("agv1", "differential", "r4c1", 0.0)])
-    s = open_session(path)
-    assert isinstance(s, FleetSession) and s.broker is not None
+    s = open_session(path, master=False)  # the test is the master (serve --no-master)
+    assert isinstance(s, FleetSession) and s.broker is not None and s.link is None
     m = None
     try:
         assert s.broker_url.startswith("mqtt://127.0.0.1:")
         assert s.banner() == [
             f"VDA 5050 2.1.0: 1 vehicles on the embedded broker {s.broker_url}, "
-            "topics uagv/v2/agvsim/<serial>/<topic>"
+            "topics uagv/v2/agvsim/<serial>/<topic>; waiting for your master's orders"
         ]
         host, port = s.broker_url.removeprefix("mqtt://").rsplit(":", 1)
         m = Master(host, int(port))
@@ -68,6 +68,37 @@ def test_a_vda5050_scenario_served_by_the_app_takes_orders_over_mqtt(tmp_path: P
         assert time.monotonic() - t0 < 5, "no OFFLINE after close"
         time.sleep(0.02)
     m.close()
+
+
+def test_the_app_runs_the_built_in_master_over_its_broker(tmp_path: Path) -> None:
+    """``agvsim serve`` on a scenario with transports: agvsim's master control connects to the
+    app's embedded broker like any master and has the vehicle carry the load; a reset starts
+    the master afresh with the fleet."""
+    pytest.importorskip("viser")
+    from agvsim.app.server import open_session
+
+    path = room_scenario(
+        tmp_path,
+        [("agv1", "differential", "r4c1", 0.0)],
+        extra="master:\n  transports:\n    - {source: r4c4, destination: r2c2}\n",
+    )
+    s = open_session(path)
+    try:
+        assert s.link is not None and "agvsim's master control drives them" in s.banner()[0]
+        master = s.link.master
+        t0 = time.monotonic()
+        while master.transports[0].delivered_s is None:
+            assert time.monotonic() - t0 < 120, "the transport was not delivered"
+            s.step()
+        tr = master.transports[0]
+        assert tr.vehicle == "agv1" and 0 < tr.delivered_s <= s.sim.state.t_s
+        assert s.sim.state.robot_collisions.sum() == 0
+        s.reset()
+        assert s.link is not None and s.link.master is not master
+        assert s.link.master.transports[0].delivered_s is None
+    finally:
+        s.close()
+    assert s.link is None
 
 
 def test_broker_is_refused_for_a_scenario_without_vehicles(tmp_path: Path) -> None:

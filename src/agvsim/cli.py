@@ -68,6 +68,14 @@ def serve(
             "(default: an embedded one on 127.0.0.1)."
         ),
     ] = None,
+    no_master: Annotated[
+        bool,
+        typer.Option(
+            "--no-master",
+            help="VDA 5050 vehicles wait for your master's orders (default: agvsim's master "
+            "control runs the scenario's master: block).",
+        ),
+    ] = False,
 ) -> None:
     """Open the browser app: 3D view, the robot mask, run controls, video, maze editor,
     plots. Only a browser that opens the printed address (with its token) gets in. A
@@ -113,6 +121,7 @@ def serve(
             notify=lambda m: out.print(m, markup=False, highlight=False),
             max_upload_bytes=int(max_upload_mb * 2**20),
             broker=broker,
+            master=not no_master,
         )
     except ScenarioError as e:
         _fail("error", e)

@@ -8,7 +8,10 @@ edit), so the drawing follows the world.
 is the fleet's (``build_fleet``), its vehicles are connected to an MQTT broker (the embedded
 one, or ``agvsim serve --broker mqtt://HOST:PORT``), and every simulation step publishes
 what the vehicles queued and reads what arrived, as ``FleetRun.step`` does: an external
-master drives the vehicles shown in the browser. While the run is paused the sockets are
+master drives the vehicles shown in the browser; unless ``with_master`` is False, agvsim's own
+master control (agvsim.master, docs/master.md) is that master: it connects to the same broker
+as any other would and runs the scenario's ``master:`` block (transport orders, charging,
+breakdowns). While the run is paused the sockets are
 still served (keepalive; orders wait for the next step). Reset or editing a robot rebuilds
 the fleet: every vehicle reconnects at its start node, its order gone. ``close()`` publishes
 OFFLINE and stops the embedded broker.
@@ -75,12 +78,18 @@ class FleetSession(Session):
         broker_url: str | None = None,
         out_dir: str | Path = DEFAULT_OUT,
         connect_timeout_s: float = 10.0,
+        with_master: bool = True,
+        master_period_s: float = 0.25,
     ):
         if scenario.vda5050 is None:
             raise ScenarioError(source, ["the scenario has no 'vda5050:' block of vehicles"])
         self.lock = threading.RLock()  # Session's own; close() may run before it is set
         self.fleet: Fleet | None = None
         self.transport: MqttTransport | None = None
+        self.link: Any = None  # the built-in master's MQTT side (agvsim.master.mqtt.MqttMaster)
+        self.with_master, self.master_period_s = with_master, master_period_s
+        self._breakdowns: list[tuple[float, str]] = []
+        self._next_master_s = 0.0
         self.connect_timeout_s = connect_timeout_s
         self.address = BrokerAddress.parse(broker_url) if broker_url else None
         try:
@@ -109,7 +118,8 @@ class FleetSession(Session):
 
     def _build(self, cfg: dict[str, Any]) -> Simulation:
         """The fleet's simulation; the vehicles (new ones on every rebuild) connected."""
-        fleet = build_fleet(self._scenario(cfg))
+        sc = self._scenario(cfg)
+        fleet = build_fleet(sc)
         assert self.address is not None
         if self.transport is not None:
             self.transport.close()  # the old vehicles go OFFLINE
@@ -120,7 +130,46 @@ class FleetSession(Session):
             transport.close()
             raise BrokerError(f"no vehicle could connect to {self.broker_url}")
         self.transport = transport
+        self._start_master(fleet, sc)
         return fleet.sim
+
+    def _start_master(self, fleet: Fleet, sc: Scenario) -> None:
+        """The built-in master for this (new) fleet, on the same broker, from t = 0."""
+        if self.link is not None:
+            self.link.close()
+            self.link = None
+        if not self.with_master or fleet.layout is None:
+            return
+        from datetime import UTC, datetime
+
+        from agvsim.master.config import MasterConfig
+        from agvsim.master.mqtt import MqttMaster
+        from agvsim.master.run import build_master
+
+        master = build_master(sc, fleet, sc.seed, sc.duration_s, datetime.now(UTC))
+        assert self.address is not None
+        link = MqttMaster(master, self.address, fleet.interface_name)
+        if not link.connect(self.connect_timeout_s):
+            link.close()
+            raise BrokerError(f"the master could not connect to {self.broker_url}")
+        self.link = link
+        cfg = sc.master or MasterConfig()
+        self._breakdowns = sorted((b.at_s, b.vehicle) for b in cfg.breakdowns)
+        self._next_master_s = 0.0
+
+    def _tick_master(self) -> None:
+        """Scheduled breakdowns hit the simulated vehicles; the master decides every
+        ``master_period_s`` of simulated time, as in ``agvsim fleet``."""
+        if self.link is None or self.fleet is None:
+            return
+        t = float(self.sim.state.t_s)
+        while self._breakdowns and self._breakdowns[0][0] <= t + 1e-9:
+            _, serial = self._breakdowns.pop(0)
+            self.fleet.vehicle(serial).break_down(f"scheduled breakdown at t={t:.2f} s")
+        if t + 1e-9 >= self._next_master_s:
+            self._next_master_s += self.master_period_s
+            self.link.tick(t)
+            self.link.master.metrics.collisions = int(self.sim.state.robot_collisions.sum())
 
     def _replace(self, cfg: dict[str, Any], fresh: set[str] = frozenset()) -> None:  # type: ignore[assignment]
         """A rebuilt fleet's vehicles start at their start nodes, with no order: every robot
@@ -132,6 +181,7 @@ class FleetSession(Session):
         if self.transport is not None:
             self.transport.flush()
             self.transport.poll(0.0)
+        self._tick_master()
         return ok
 
     def advance(self, wall_dt_s: float, max_work_s: float = 0.03) -> int:
@@ -150,6 +200,9 @@ class FleetSession(Session):
     def close(self) -> None:
         """Every vehicle publishes OFFLINE and disconnects; the embedded broker stops."""
         with self.lock:
+            link, self.link = self.link, None
+            if link is not None:
+                link.close()
             transport, self.transport = self.transport, None
             if transport is not None:
                 transport.close()
@@ -163,7 +216,12 @@ class FleetSession(Session):
         assert self.fleet is not None
         where = "embedded broker" if self.broker is not None else "broker"
         n = len(self.fleet.vehicles)
+        master = (
+            "agvsim's master control drives them (serve --no-master: leave them to yours)"
+            if self.link is not None
+            else "waiting for your master's orders"
+        )
         return [
             f"VDA 5050 {self.fleet.config.version}: {n} vehicles on the {where} "
-            f"{self.broker_url}, topics {self.topic_prefix()}/<serial>/<topic>"
+            f"{self.broker_url}, topics {self.topic_prefix()}/<serial>/<topic>; {master}"
         ]

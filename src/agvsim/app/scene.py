@@ -26,6 +26,7 @@ RANGER_RGB = (40, 200, 60)
 LIDAR_RGB = (40, 110, 235)
 HIT_RGB = (230, 40, 40)
 WALL_RGB = (150, 150, 160)
+BOX_RGB = (196, 140, 72)  # racks and pallets: wood / orange steel
 
 
 def hex_rgb(color: str) -> tuple[int, int, int]:
@@ -69,6 +70,7 @@ class SceneView:
         self._overlay_node: Any = None
         self._markers: list[Any] = []
         self._layout_nodes: list[Any] = []  # the scenario's layout: nodes, edges, stations
+        self._boxes: list[Any] = []  # the world's static boxes (racks, pallets)
         self._frame = 0
         self.frames_sent = 0
         server.scene.set_up_direction("+z")
@@ -105,8 +107,30 @@ class SceneView:
         else:
             sc.add_frame("/walls", show_axes=False)  # replaces an old mesh
         self._draw_markers(markers)
+        self._draw_boxes()
         self._draw_overlay()
         self._layout_nodes = fleet_view.draw_session_layout(sc, self.session, self._layout_nodes)
+
+    def _draw_boxes(self) -> None:
+        """The world's static boxes (``world.boxes``: racks, pallets) as solid blocks, as tall
+        as the walls; they are obstacles to the robots and their lidars."""
+        for node in self._boxes:
+            node.remove()
+        self._boxes = []
+        boxes = np.asarray(self.session.sim.world.boxes, dtype=float).reshape(-1, 5)
+        height = min(WALL_HEIGHT_M, 1.0)
+        for k, (cx, cy, th, hl, hw) in enumerate(boxes.tolist()):
+            self._boxes.append(
+                self.server.scene.add_box(
+                    f"/boxes/b{k}",
+                    color=BOX_RGB,
+                    dimensions=(2 * hl, 2 * hw, height),
+                    wxyz=(float(np.cos(th / 2)), 0.0, 0.0, float(np.sin(th / 2))),
+                    position=(cx, cy, height / 2),
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+            )
 
     def _draw_markers(self, markers: tuple[Marker, ...]) -> None:
         """Each marker as an image (its texture, quiet zone included) just in front of its

@@ -165,15 +165,19 @@ def open_session(
     scenario: str | Path | Scenario | None,
     out_dir: str | Path = DEFAULT_OUT,
     broker: str | None = None,
+    master: bool = True,
 ) -> Session:
     """The session of ``scenario``: a ``FleetSession`` (app.fleet_view) when it has a
-    ``vda5050:`` block, its vehicles on ``broker`` (None: an embedded broker)."""
+    ``vda5050:`` block, its vehicles on ``broker`` (None: an embedded broker), driven by
+    agvsim's master control unless ``master`` is False (then by yours)."""
     if scenario is not None and not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     if isinstance(scenario, Scenario) and scenario.vda5050 is not None:
         from agvsim.app.fleet_view import FleetSession
 
-        return FleetSession(scenario, scenario._source, broker_url=broker, out_dir=out_dir)
+        return FleetSession(
+            scenario, scenario._source, broker_url=broker, out_dir=out_dir, with_master=master
+        )
     if broker is not None:
         raise ScenarioError(
             str(getattr(scenario, "_source", "scenario")),
@@ -213,11 +217,12 @@ def serve(
     notify: Callable[[str], None] = print,
     max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
     broker: str | None = None,
+    master: bool = True,
 ) -> None:
     """Run the app until Ctrl-C (or SIGTERM); a video being recorded is finished first.
     ``max_upload_bytes``: the most one file sent from a browser may have. ``broker``: the
     MQTT broker of a scenario's VDA 5050 vehicles (None: an embedded one)."""
-    session = open_session(scenario, out_dir, broker)
+    session = open_session(scenario, out_dir, broker, master)
     session.upload_limits = UploadLimits(max_upload_bytes, max_unpacked_bytes=4 * max_upload_bytes)
     try:
         app = App(session, host=host, port=port, notify=notify).start()
