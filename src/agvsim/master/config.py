@@ -8,13 +8,16 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # as every scenario block: NaN and inf refused, text bounded
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=4096)
 
 
 class TransportEntry(_Strict):
     source: str = Field(description="station id (or node id) to pick the load at")
     destination: str = Field(description="station id (or node id) to drop it at")
-    at_s: float = Field(default=0.0, ge=0, description="when the order is placed (simulated s)")
+    at_s: float = Field(
+        default=0.0, ge=0, le=1e7, description="when the order is placed (simulated s)"
+    )
 
 
 class GenerateConfig(_Strict):
@@ -43,20 +46,20 @@ class ChargingConfig(_Strict):
 
 class BreakdownEntry(_Strict):
     vehicle: str = Field(description="serial number of the vehicle that fails")
-    at_s: float = Field(ge=0, description="when (simulated s): it stops with a FATAL error")
+    at_s: float = Field(ge=0, le=1e7, description="when (simulated s): it stops with a FATAL error")
 
 
 class MasterConfig(_Strict):
     fleet_size: int | None = Field(
         default=None, ge=1, description="only the first N vehicles of vda5050 (sweeps)"
     )
-    transports: list[TransportEntry] = Field(default_factory=list)
+    transports: list[TransportEntry] = Field(default_factory=list, max_length=1_000_000)
     generate: GenerateConfig | None = None
     dispatch: Literal["nearest_idle"] = Field(
         default="nearest_idle", description="dispatching policy (agvsim.master.dispatch.POLICIES)"
     )
     charging: ChargingConfig = Field(default_factory=ChargingConfig)
-    breakdowns: list[BreakdownEntry] = Field(default_factory=list)
+    breakdowns: list[BreakdownEntry] = Field(default_factory=list, max_length=100_000)
     stall_s: float = Field(
         default=300.0, gt=0, description="an order with no progress this long counts as stalled"
     )
