@@ -74,15 +74,15 @@ def test_a_camera_turned_on_in_the_mask_shows_its_frames(app):
     w["sensors.camera.width_px"].value = 64
     w["sensors.camera.height_px"].value = 48
     panel._apply()
-    assert "applied" in panel.mask_msg.content
+    assert "applied" in panel.apply_msg.content
     (spec,) = session.sim.robots[session.sim.robot_index("blind")].cameras
     assert (spec.width_px, spec.height_px) == (64, 48)
     panel.refresh()
     assert panel.camera_view is not None and panel.camera_view.image.shape == (48, 64, 3)
     panel._mask_widgets["sensors.camera.width_px"].value = 0
     panel._apply()
-    assert "width_px" in panel.mask_msg.content and "greater than or equal to 8" in (
-        panel.mask_msg.content
+    assert "width_px" in panel.apply_msg.content and "greater than or equal to 8" in (
+        panel.apply_msg.content
     )
     panel._mask_widgets["sensors.camera"].value = False
     panel._apply()

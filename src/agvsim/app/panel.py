@@ -341,7 +341,9 @@ class Panel:
 
     # ------------------------------------------------------------------ the mask
     def _select(self, name: str) -> None:
-        if name not in self.session.robot_names():
+        # the robot list is set again after Apply: picking the robot already picked keeps
+        # the mask and Apply's result
+        if name not in self.session.robot_names() or name == self.selected:
             return
         self.selected = name
         self._apply_note = ""
