@@ -32,6 +32,7 @@ from agvsim.slam import scan_matching as sm
 from agvsim.slam.frontend import MotionFilter, Submap, Tracker, TrackingConfig
 from agvsim.slam.loop_closure import LoopClosure, LoopConfig, LoopDetector
 from agvsim.slam.mapping import OccupancyMap, render_occupancy
+from agvsim.slam.memory import release_free_heap
 from agvsim.slam.posegraph import PoseGraph, optimize
 from agvsim.slam.se2 import between, compose, inverse
 
@@ -350,6 +351,7 @@ class GraphSlam:
         self._last_optimised_node = len(self.keyframes)
         self.loops.clear_pending()
         self.n_optimisations += 1
+        release_free_heap()  # the solver's temporaries grow with the graph (see .memory)
 
     # ------------------------------------------------------------------ results
     def finish(self) -> None:
