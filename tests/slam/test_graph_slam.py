@@ -293,4 +293,27 @@ def test_pyramid_cache_stays_within_its_budget() -> None:
         det._pyramid(sub)
         assert det._cached_bytes <= budget_mib * 2**20
     assert list(det._pyramids) == [4, 5]  # the least recently used went first
+    assert det._releaser.releases > 0  # the freed heap was handed back as it went
     np.testing.assert_array_equal(det._pyramid(sub)[0], sub.field())  # level 0 is the field
+
+
+def test_keyframes_are_stored_compactly() -> None:
+    """A keyframe keeps its map rays as int16 (a few mm) and hit flags, about 5 bytes a beam
+    plus its two poses; its matching points go once its own loop search ran. The map rays
+    read back to within half a step of the float ones."""
+    path = loop_path(0.5)
+    slam = GraphSlam(30.0)
+    for k, pose in enumerate(path):
+        slam.update(0.1 * k, cast(pose), ANGLES, pose)
+    assert len(slam.keyframes) > 20
+    beams = len(ANGLES)
+    for node, kf in enumerate(slam.keyframes):
+        assert kf.points is None
+        assert kf.ends_q.dtype == np.int16 and kf.hits.dtype == np.bool_
+        assert kf.nbytes <= 5 * beams + 2 * 3 * 8, node  # 948 bytes, against 4.4 kB before
+    first = slam.keyframes[0]  # the first scan is a keyframe
+    _, ends, hits = slam.scan_points(cast(path[0]), ANGLES)
+    np.testing.assert_array_equal(first.hits, hits)
+    np.testing.assert_allclose(first.ends, ends, rtol=0, atol=0.5 * slam.end_unit_m + 1e-5)
+    with pytest.raises(ValueError, match="dropped"):
+        slam.find_loop_closures(0)

@@ -32,6 +32,7 @@ from agvsim.slam import scan_matching as sm
 from agvsim.slam.frontend import MotionFilter, Submap, Tracker, TrackingConfig
 from agvsim.slam.loop_closure import LoopClosure, LoopConfig, LoopDetector
 from agvsim.slam.mapping import OccupancyMap, render_occupancy
+from agvsim.slam.memory import release_free_heap
 from agvsim.slam.posegraph import PoseGraph, optimize
 from agvsim.slam.se2 import between, compose, inverse
 
@@ -39,6 +40,7 @@ __all__ = ["GraphSlam", "SlamConfig"]
 
 _MAX_WARMUP_SCANS = 2000  # kept for processing again; a robot standing still longer goes on
 _WARMUP_PASSES = 3
+_END_UNIT_M = 0.002  # finest step of the keyframes' stored map rays (m)
 
 F64 = NDArray[np.float64]
 
@@ -77,13 +79,30 @@ def _information(sigma_m: float, sigma_rad: float) -> F64:
 
 @dataclass
 class _Keyframe:
+    """What a keyframe keeps for the whole run, compactly (about 5 bytes a beam): its map rays
+    as int16 multiples of ``end_unit_m`` (a few mm; the map's cells are 5 cm) and hit flags.
+    Its matching points are needed only by its own loop-closure search, right after it is
+    added: :class:`GraphSlam` drops them then (``points`` is None after that)."""
+
     local: F64  # (3,) local tracking pose
-    points: F64  # (n, 2) matching points, robot frame
-    ends: NDArray[np.float32]  # (m, 2) beam end points for the map, robot frame
+    points: F64 | None  # (n, 2) matching points, robot frame; None once its loops were searched
+    ends_q: NDArray[np.int16]  # (m, 2) beam end points for the map, robot frame, in end_unit_m
+    end_unit_m: float
     hits: NDArray[np.bool_]  # (m,) True: a return; False: the ray only clears space
     ang_step: float  # angular search step for its points (rad)
     odom: F64  # (3,) the robot's odometry pose at the keyframe
     submap: int = -1  # the submap it was matched against (the most complete)
+
+    @property
+    def ends(self) -> NDArray[np.float32]:
+        """(m, 2) beam end points (m, robot frame), to within half ``end_unit_m``."""
+        return self.ends_q.astype(np.float32) * np.float32(self.end_unit_m)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays (what grows with the number of keyframes)."""
+        pts = 0 if self.points is None else self.points.nbytes
+        return pts + self.ends_q.nbytes + self.hits.nbytes + self.local.nbytes + self.odom.nbytes
 
 
 class GraphSlam:
@@ -100,6 +119,9 @@ class GraphSlam:
         self.cfg = cfg = config or SlamConfig()
         self.max_range_m = cfg.max_range_m or min(sensor_max_range_m, cfg.usable_range_m)
         self.laser_offset = np.zeros(3) if laser_offset is None else np.asarray(laser_offset, float)
+        # keyframes' map rays are kept as int16: 2 mm steps up to 65 m, coarser beyond
+        reach = self.max_range_m + float(np.hypot(*self.laser_offset[:2]))
+        self.end_unit_m = max(_END_UNIT_M, reach / (np.iinfo(np.int16).max - 1))
         # the first scans, kept to be processed again once odometry's and the matches' noises
         # are known (None after that, or without odometry fusion)
         self._warmup: list[tuple] | None = [] if cfg.tracking.fuse_odometry else None
@@ -172,6 +194,7 @@ class GraphSlam:
             node = self.add_keyframe(pose, points, ends, hits)
             for closure in self.find_loop_closures(node):
                 self.add_loop_closure(closure)
+            self.keyframes[node].points = None  # only its own loop search needed them
             if self.loop_closed():
                 self.optimise()
         self.scan_times.append(float(timestamp))
@@ -214,8 +237,15 @@ class GraphSlam:
     ) -> int:
         """Graph node for the keyframe, edges to the previous keyframe and its submaps."""
         node = len(self.keyframes)
+        ends_q = np.rint(ends / self.end_unit_m).astype(np.int16)
         kf = _Keyframe(
-            pose.copy(), points, ends, hits, self.angular_step(points), self._odom.copy()
+            pose.copy(),
+            points,
+            ends_q,
+            self.end_unit_m,
+            hits,
+            self.angular_step(points),
+            self._odom.copy(),
         )
         self.keyframes.append(kf)
         var = self.graph.add_node(compose(self._global_from_local, pose))
@@ -258,10 +288,13 @@ class GraphSlam:
         return node
 
     def find_loop_closures(self, node: int) -> list[LoopClosure]:
-        """Candidates within the search radius, matched and verified."""
+        """Candidates within the search radius, matched and verified (for a keyframe whose
+        matching points are still kept: the newest)."""
         est = self.graph.poses[np.asarray(self.node_var)]
         homes = self._homes[: len(self.keyframes)]
         kf = self.keyframes[node]
+        if kf.points is None:
+            raise ValueError(f"keyframe {node}: its matching points were dropped")
         out: list[LoopClosure] = []
         path = self._path[: node + 1]
         since = path[node] - min(path[node], self._path_at_loop)
@@ -318,6 +351,7 @@ class GraphSlam:
         self._last_optimised_node = len(self.keyframes)
         self.loops.clear_pending()
         self.n_optimisations += 1
+        release_free_heap()  # the solver's temporaries grow with the graph (see .memory)
 
     # ------------------------------------------------------------------ results
     def finish(self) -> None:

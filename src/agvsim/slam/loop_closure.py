@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.frontend import Submap
+from agvsim.slam.memory import HeapReleaser
 from agvsim.slam.se2 import between, compose
 
 __all__ = ["LoopClosure", "LoopConfig", "LoopDetector"]
@@ -86,6 +87,9 @@ class LoopDetector:
         self.res = resolution_m
         self._pyramids: OrderedDict[int, np.ndarray] = OrderedDict()
         self._cached_bytes = 0
+        # evicted pyramids (and the fields they were built from) free large blocks: give the
+        # heap's free pages back after every quarter of the cache's budget evicted
+        self._releaser = HeapReleaser(max(int(cfg.pyramid_cache_mib * 2**20) // 4, 1 << 20))
         self._pending: list[LoopClosure] = []
 
     def candidates(
@@ -128,8 +132,9 @@ class LoopDetector:
             self._cached_bytes += pyr.nbytes
             budget = self.cfg.pyramid_cache_mib * 2**20
             while self._cached_bytes > budget and len(self._pyramids) > 1:
-                _, old = self._pyramids.popitem(last=False)
-                self._cached_bytes -= old.nbytes
+                nbytes = self._pyramids.popitem(last=False)[1].nbytes  # freed here
+                self._cached_bytes -= nbytes
+                self._releaser.freed(nbytes)
         else:
             self._pyramids.move_to_end(s.index)
         return pyr

@@ -317,7 +317,11 @@ class OptimizeResult:
 
 
 class _NormalEquations:
-    """Sparse ``H`` (3M x 3M, M free nodes) with a pattern built once; values by bincount."""
+    """Sparse ``H`` (3M x 3M, M free nodes) with a pattern built once; values by bincount.
+
+    The pattern is found on 3x3 blocks (one key per edge block, not nine per scalar entry):
+    its temporaries are a ninth of a scalar pattern's, and ``H`` is summed per block before
+    it is scattered into CSR order."""
 
     def __init__(self, n_nodes: int, ei: I64, ej: I64, fixed: Sequence[int]) -> None:
         var = np.full(n_nodes, -1, dtype=np.int64)
@@ -326,29 +330,41 @@ class _NormalEquations:
         if np.any((fixed_idx < 0) | (fixed_idx >= n_nodes)):
             raise ValueError(f"fixed node indices must lie in [0, {n_nodes}), got {list(fixed)}")
         free[fixed_idx] = False
-        var[free] = np.arange(int(free.sum()))
-        self.var, self.n = var, 3 * int(free.sum())
+        m = int(free.sum())
+        var[free] = np.arange(m)
+        self.var, self.n = var, 3 * m
         three = np.arange(3)
-        # the 4 blocks (ii, ij, ji, jj) of every edge, 9 entries each: rows/cols (E, 4, 3, 3)
+        # the 4 blocks (ii, ij, ji, jj) of every edge: block rows/cols (E, 4)
         bi, bj = var[ei], var[ej]
-        blk_r = np.stack([bi, bi, bj, bj], axis=1)
-        blk_c = np.stack([bi, bj, bi, bj], axis=1)
-        shape = (ei.shape[0], 4, 3, 3)
-        rows = np.broadcast_to(3 * blk_r[:, :, None, None] + three[None, None, :, None], shape)
-        cols = np.broadcast_to(3 * blk_c[:, :, None, None] + three[None, None, None, :], shape)
-        valid = np.broadcast_to(((blk_r >= 0) & (blk_c >= 0))[:, :, None, None], shape)
-        self.valid = valid.reshape(-1)
-        diag = np.arange(self.n)
-        keys = np.concatenate(
-            [(rows * self.n + cols).reshape(-1)[self.valid], diag * self.n + diag]
+        blk_r = np.stack([bi, bi, bj, bj], axis=1).reshape(-1)
+        blk_c = np.stack([bi, bj, bi, bj], axis=1).reshape(-1)
+        self.valid = (blk_r >= 0) & (blk_c >= 0)
+        diag = np.arange(m, dtype=np.int64)
+        keys = np.concatenate([blk_r[self.valid] * m + blk_c[self.valid], diag * m + diag])
+        ukeys, slot = np.unique(keys, return_inverse=True)
+        del keys
+        self.slot = slot[: slot.shape[0] - m]  # block of each valid edge block
+        r, c = ukeys // max(m, 1), ukeys % max(m, 1)
+        per_row = np.bincount(r, minlength=m)  # blocks in each block row
+        first = np.concatenate([[0], np.cumsum(per_row)])  # first block of each block row
+        q = np.arange(ukeys.shape[0]) - first[r]  # place of each block in its block row
+        self.n_blocks = ukeys.shape[0]
+        self.nnz = 9 * self.n_blocks
+        # scalar row 3 br + a holds the a-th rows of the blocks of block row br, in turn
+        row_len = np.repeat(3 * per_row, 3)
+        self.indptr = np.concatenate([[0], np.cumsum(row_len)]).astype(np.int32)
+        # CSR position of entry (a, b) of each block (n_blocks, 3, 3)
+        self.pos = (
+            9 * first[r][:, None, None]
+            + three[None, :, None] * (3 * per_row[r])[:, None, None]
+            + 3 * q[:, None, None]
+            + three[None, None, :]
         )
-        ukeys, self.slot = np.unique(keys, return_inverse=True)
-        self.nnz = ukeys.shape[0]
-        r, c = ukeys // self.n, ukeys % self.n
-        self.indptr = np.searchsorted(r, np.arange(self.n + 1)).astype(np.int32)
-        self.indices = c.astype(np.int32)
-        self.diag_slot = self.slot[-self.n :]
-        self.slot = self.slot[: -self.n]
+        self.indices = np.empty(self.nnz, dtype=np.int32)
+        self.indices[self.pos.reshape(-1)] = np.broadcast_to(
+            3 * c[:, None, None] + three[None, None, :], self.pos.shape
+        ).reshape(-1)
+        self.diag_slot = self.pos[slot[slot.shape[0] - m :]][:, three, three].reshape(-1)
         # b: gradient entries of i and j per edge (E, 2, 3)
         self.b_rows = (3 * np.stack([bi, bj], axis=1)[:, :, None] + three).reshape(-1)
         self.b_valid = np.repeat(np.stack([bi, bj], axis=1) >= 0, 3, axis=1).reshape(-1)
@@ -358,9 +374,13 @@ class _NormalEquations:
         at_om = np.einsum("kba,kbc->kac", a, wom)  # A^T W Omega
         bt_om = np.einsum("kba,kbc->kac", b, wom)
         blocks = np.stack([at_om @ a, at_om @ b, bt_om @ a, bt_om @ b], axis=1)  # (E, 4, 3, 3)
-        h = np.bincount(self.slot, blocks.reshape(-1)[self.valid], minlength=self.nnz).astype(
-            np.float64, copy=False
-        )
+        valid = blocks.reshape(-1, 3, 3)[self.valid]
+        h = np.empty(self.nnz)
+        for i in range(3):
+            for j in range(3):
+                h[self.pos[:, i, j]] = np.bincount(
+                    self.slot, valid[:, i, j], minlength=self.n_blocks
+                )
         g = np.stack([np.einsum("kab,kb->ka", at_om, e), np.einsum("kab,kb->ka", bt_om, e)], 1)
         rows, vals = self.b_rows[self.b_valid], g.reshape(-1)[self.b_valid]
         grad = np.bincount(rows, vals, minlength=self.n).astype(np.float64, copy=False)
