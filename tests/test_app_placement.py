@@ -87,3 +87,28 @@ def test_placing_a_robot_by_a_click_takes_the_nearest_free_spot():
     x, y, _ = s.sim.state.poses[0]
     assert blocker(s.sim, 0, (x, y, 0.0)) is None and 0.0 < math.hypot(x - 2.0, y) < 1.0
     assert s.robot_config("agv")["pose"]["x_m"] == -2.0  # the initial pose stays
+
+
+def test_a_wall_added_in_the_maze_editor_is_a_wall_to_the_behaviours_not_a_robot():
+    """The behaviours tell robots from walls with a distance field of the walls: the maze
+    editor renews it, so a new wall is at distance 0 and a removed one is free floor."""
+    from agvsim.control.traffic import RobotSight
+
+    robot = {
+        "name": "agv",
+        "model": "differential",
+        "pose": {"x_m": -2.5, "y_m": -2.5, "theta_deg": 0.0},
+        "sensors": [{"type": "lidar", "beams": 36, "range_max_m": 5.0}],
+        "controller": {"type": "avoid", "sensor": "lidar"},
+    }
+    s = Session(parse_scenario({"name": "room", "world": {"picture": ROOM}, "robots": [robot]}))
+    sights = [
+        c.sight for c in (b.controller for b in s.sim.bindings) if isinstance(c.sight, RobotSight)
+    ]
+    assert sights
+    centre = (np.array([0.0]), np.array([0.0]))  # the free cell (4, 4) of the room
+    assert all(sg.static.distance_m(*centre)[0] > 2.5 for sg in sights)
+    assert s.toggle_cell(4, 4)  # a wall now
+    assert all(sg.static.distance_m(*centre)[0] == 0.0 for sg in sights)
+    assert not s.toggle_cell(4, 4)  # free again
+    assert all(sg.static.distance_m(*centre)[0] > 2.5 for sg in sights)

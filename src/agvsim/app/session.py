@@ -33,6 +33,7 @@ import yaml
 from agvsim.app import uploads
 from agvsim.app.placement import place_clear
 from agvsim.control.teleop import Teleop
+from agvsim.control.traffic import StaticMap, refresh_static
 from agvsim.scenario import Scenario, ScenarioError, build, load_scenario, parse_scenario
 from agvsim.sim.engine import ControllerError, Simulation
 from agvsim.world import loaders, mazes
@@ -571,6 +572,8 @@ class Session:
 
     def _set_grid(self, grid: OccupancyGrid) -> None:
         self.sim.set_grid(grid)
+        # the behaviours tell robots from walls with a distance field of the walls: renew it
+        refresh_static(self.sim.bindings, StaticMap.of(grid, self.sim.world.boxes))
         self.config = {**self.config, "world": _world_with_grid(self.config["world"], grid)}
         self.world_version += 1
 

@@ -454,3 +454,17 @@ def _time_to_contact(
             if found:
                 out[i] = t
                 break
+
+
+def refresh_static(controllers: Any, static: StaticMap) -> int:
+    """Give every :class:`RobotSight` of ``controllers`` (the simulation's bindings or the
+    controllers themselves) the map ``static``, after the walls or boxes changed (a maze
+    editor): otherwise a new wall would read as a robot. Returns how many were updated."""
+    n = 0
+    for c in controllers:
+        ctrl = getattr(c, "controller", c)
+        sight = ctrl.__dict__.get("sight") if hasattr(ctrl, "__dict__") else None
+        if isinstance(sight, RobotSight):
+            sight.static = static
+            n += 1
+    return n
