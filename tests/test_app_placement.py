@@ -112,3 +112,30 @@ def test_a_wall_added_in_the_maze_editor_is_a_wall_to_the_behaviours_not_a_robot
     assert all(sg.static.distance_m(*centre)[0] == 0.0 for sg in sights)
     assert not s.toggle_cell(4, 4)  # free again
     assert all(sg.static.distance_m(*centre)[0] > 2.5 for sg in sights)
+
+
+def test_dragging_the_place_gizmo_moves_the_robot_to_the_nearest_free_pose():
+    """The "place robots" gizmo (viser transform controls, x/y only) sits on the picked
+    robot; letting it go over the other robot puts the robot at the nearest free pose beside
+    it, and the gizmo follows to where the robot really went."""
+    viser = pytest.importorskip("viser")
+    from agvsim.app.drag_place import GIZMO_Z_M, DragPlace
+    from agvsim.bench_app import free_port
+
+    s = _session()
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    notes: list[str] = []
+    try:
+        drag = DragPlace(server.scene, s, notes.append)
+        drag.show("agv")
+        np.testing.assert_allclose(drag.handle.position, (-2.0, 0.0, GIZMO_Z_M))
+        text = drag.release(2.0, 0.0)  # onto "parked"
+        x, y, th = s.sim.state.poses[0]
+        assert text == notes[-1] and text.startswith("agv placed at")
+        assert th == 0.0 and blocker(s.sim, 0, (x, y, th)) is None  # clear of robot and walls
+        assert 0.0 < math.hypot(x - 2.0, y) < 1.5  # beside it, as near as it fits
+        np.testing.assert_allclose(drag.handle.position, (x, y, GIZMO_Z_M))
+        drag.hide()
+        assert drag.handle is None and drag.release(0.0, 0.0) == ""
+    finally:
+        server.stop()

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from agvsim.app.drag_place import DragPlace
 from agvsim.app.friction_brush import paint_friction
 from agvsim.app.mask import Field, MaskError, fields_in_error, mask_fields, robot_from_mask
 from agvsim.app.session import SPEEDS, EditError, Session
@@ -346,6 +347,8 @@ class Panel:
         if name not in self.session.robot_names() or name == self.selected:
             return
         self.selected = name
+        if getattr(self, "_drag", None) is not None and self._drag.handle is not None:
+            self._drag.show(name)  # the drag gizmo moves to the newly picked robot
         self._apply_note = ""
         self._build_mask(self.session.robot_config(name))
         self._plot_layout = None
@@ -452,8 +455,12 @@ class Panel:
         self.place = gui.add_checkbox(
             "place robots",
             initial_value=False,
-            hint="click the floor (best in the top plan view) to move the robot picked in the "
-            "Robot tab there, at the nearest free spot",
+            hint="drag the gizmo on the robot picked in the Robot tab, or click the floor (best "
+            "in the top plan view), to move it there, at the nearest free spot",
+        )
+        self._drag = DragPlace(self.server.scene, s, self._world_note)
+        self.place.on_update(
+            lambda _: self._drag.show(self.selected) if self.place.value else self._drag.hide()
         )
         self.brush_mu = gui.add_number(
             "paint friction mu",
@@ -499,6 +506,9 @@ class Panel:
     def _world_do(self, fn: Any) -> None:
         self._do(fn, self.world_msg)
 
+    def _world_note(self, text: str) -> None:
+        self.world_msg.content = text
+
     def _place_robot(self, origin: Any, direction: Any) -> None:
         o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
         if d[2] >= -1e-9:
@@ -507,6 +517,8 @@ class Panel:
         t = -o[2] / d[2]
         note = self.session.move_robot(self.selected, o[0] + t * d[0], o[1] + t * d[1])
         self.world_msg.content = note
+        if self._drag.handle is not None:
+            self._drag.show(self.selected)
 
     def _click_cell(self, origin: Any, direction: Any) -> None:
         cell = pick_cell(self.session, np.asarray(origin), np.asarray(direction))
