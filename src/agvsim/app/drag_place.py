@@ -31,7 +31,7 @@ class DragPlace:
         if self.handle is None:
             self.handle = self.scene.add_transform_controls(
                 "/place_robot",
-                scale=0.8,
+                scale=1.5,
                 active_axes=(True, True, False),
                 disable_rotations=True,
                 depth_test=False,
