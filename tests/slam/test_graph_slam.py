@@ -118,6 +118,11 @@ def test_loop_closes_on_revisit_and_beats_odometry() -> None:
     rel_est, rel_true = between(est[0], est[-1]), between(truth[0], truth[-1])
     assert math.hypot(*(rel_est[:2] - rel_true[:2])) < 0.05
     assert len(est) == len(truth) and slam.occupancy_map().logodds.max() > 0
+    # a closure keeps its own small poses, not views of an (N, 3) array of every keyframe
+    # (that kept one copy of the graph alive per closure: memory quadratic in the log)
+    for c in slam.loop_edges:
+        for pose in (c.measurement, c.matched, c.estimate, c.local, c.information):
+            assert pose.base is None or pose.base.size <= 9
 
 
 def finished_submap(path: np.ndarray):  # type: ignore[no-untyped-def]

@@ -307,7 +307,7 @@ class GraphSlam:
                 node,
                 kf.points,
                 kf.ang_step,
-                est[node],
+                est[node].copy(),  # not a view: it is kept in the closure
                 kf.local,
                 self.tracker.submaps[s],
                 g_s,

@@ -190,8 +190,10 @@ class LoopDetector:
             meas,
             float(score),
             compose(g_submap, meas),
-            g_node,
-            l_node,
+            # copies: a row of the caller's (N, 3) pose array would keep all of it alive, one
+            # whole copy of the graph per loop closure (memory quadratic in the log's length)
+            np.array(g_node, dtype=np.float64),
+            np.array(l_node, dtype=np.float64),
             _shape_information(hess, -pose[2], cfg.sigma_m, cfg.min_eigen_ratio),
         )
 
