@@ -65,7 +65,7 @@ def test_a_vda5050_scenario_served_by_the_app_takes_orders_over_mqtt(tmp_path: P
     assert s.broker is None and s.transport is None
     t0 = time.monotonic()
     while m.last("agv1", "connection")["connectionState"] != "OFFLINE":
-        assert time.monotonic() - t0 < 5, "no OFFLINE after close"
+        assert time.monotonic() - t0 < 20, "no OFFLINE after close"
         time.sleep(0.02)
     m.close()
 

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import signal
 from pathlib import Path
 from typing import Any
 
 from agvsim.fleet.transport import BrokerAddress
+from agvsim.signals import exit_code, terminate_as_interrupt
 
 
 def _say(console: Any, text: str) -> None:
@@ -88,12 +88,12 @@ def fleet_command(
             _say(out, "master: agvsim's (dispatch, SIPP routes, reservations); --no-master: none")
         pace = "as fast as it can" if speed <= 0 else f"{speed:g}x real time"
         _say(out, f"running ({pace}); Ctrl-C stops")
-        signal.signal(signal.SIGTERM, signal.default_int_handler)
-        run.run(duration, speed)
+        with terminate_as_interrupt():  # SIGTERM stops it like Ctrl-C; the handler is restored
+            run.run(duration, speed)
         return 0
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         _say(out, "stopping: vehicles publish OFFLINE")
-        return 130
+        return exit_code(e)
     finally:
         run.close()
         if master:
