@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
@@ -691,7 +691,7 @@ def test_picking_a_load_lengthens_the_next_stop():
     assert sim.dynamics.mass_kg().tolist() == [40.0]
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=12, deadline=None, derandomize=True, database=None)
 @given(
     name=st.sampled_from(sorted(MODELS)),
     mass=st.floats(5.0, 500.0),
@@ -701,6 +701,8 @@ def test_picking_a_load_lengthens_the_next_stop():
     tau=st.floats(0.002, 0.5),
     seed=st.integers(0, 1000),
 )
+# Newton's step jumped across the Coulomb zone of a torque-limited wheel and back (a cycle)
+@example(name="ackermann", mass=390.0, mu=1.0, slip=0.03125, torque=2.0, tau=0.5, seed=0)
 def test_any_sensible_robot_stays_stable_and_passive(name, mass, mu, slip, torque, tau, seed):
     """Automatic sub-steps keep every model stable for any sensible mass, friction, slip
     zone, motor and controller: finite, and never more kinetic energy than motor work."""

@@ -38,6 +38,7 @@ NB = 22
 W_PX, W_PY, W_BETA, W_GAMMA, W_KIND, W_DRIVEN, W_STEER, W_NORMAL, W_J = 0, 1, 2, 3, 4, 5, 6, 7, 8
 W_DIRS = 9  # 9-12: cos, sin of the rolling direction and of the force axis, unsteered
 NWC = 13
+NKAP = 15  # columns of solve_stage's per-wheel scratch
 KIND_2D = 0  # a standard wheel: friction in both directions (friction circle)
 KIND_1D = 1  # force only along the axis at angle gamma to the rolling direction (rollers)
 STEER_NONE, STEER_BICYCLE, STEER_ACKERMANN = 0, 1, 2
@@ -179,7 +180,7 @@ def solve_stage(
     y: np.ndarray,  # (3 + W,) in: first guess; out: the stage value
     tau: np.ndarray,  # (W,) out: motor torque at y
     slip: np.ndarray,  # (W,) out: slip speed at y; phi of free wheels in y
-    kap: np.ndarray,  # (W, 5) scratch
+    kap: np.ndarray,  # (W, NKAP) scratch
 ) -> int:
     """Newton's method for one implicit stage, y = a + gh f(y), y = (v_c, omega, phi).
     Returns the regime of the solution: per wheel, whether it slides (past the Coulomb
@@ -231,6 +232,8 @@ def solve_stage(
                 h11, h12, h22 = gm1 * t1 + gs1 * u1, gm1 * t2 + gs1 * u2, gm2 * t2 + gs2 * u2
                 k0, k1, k2 = -r * t0, -r * t1, -r * t2  # dQ/dphi = (dg/dv)^T
                 rc, dmain, fmain = r, d00, fm
+                kap[i, 5], kap[i, 6], kap[i, 7], kap[i, 8] = sm, st, gm0, gm1
+                kap[i, 9], kap[i, 10], kap[i, 11], kap[i, 12] = gm2, gs0, gs1, gs2
             else:
                 if int(wi[W_KIND]) == KIND_2D:  # a free standard wheel: side force only
                     ax, ay = -sa, ca
@@ -248,9 +251,12 @@ def solve_stage(
                 h11, h12, h22 = dmain * g1 * g1, dmain * g1 * g2, dmain * g2 * g2
                 k0, k1, k2 = -rc * dmain * g0, -rc * dmain * g1, -rc * dmain * g2
                 fmain = fm
+                kap[i, 5], kap[i, 6], kap[i, 7], kap[i, 8] = sm, 0.0, g0, g1
+                kap[i, 9], kap[i, 10], kap[i, 11], kap[i, 12] = g2, 0.0, 0.0, 0.0
                 if not driven:  # it rolls freely: its spin follows the contact
                     y[3 + i] = (ux * ca + uy * sa) / r
             slip[i] = sn
+            kap[i, 13] = rc if driven else 0.0
             if not tyre and sn >= vslip:
                 sig |= 1 << (2 * i)
             r0 -= gh * q0
@@ -299,17 +305,41 @@ def solve_stage(
         dv0 = -(c00 * r0 + c01 * r1 + c02 * r2) / det
         dv1 = -(c01 * r0 + c11 * r1 + c12 * r2) / det
         dv2 = -(c02 * r0 + c12 * r1 + c22 * r2) / det
+        for i in range(nw):
+            kap[i, 14] = 0.0
+            if kap[i, 3] != 0.0:
+                dphi = gh * (kap[i, 0] * dv0 + kap[i, 1] * dv1 + kap[i, 2] * dv2) - kap[i, 4]
+                kap[i, 14] = dphi * kap[i, 3]
+        # the friction law is flat past its kink: from a sliding wheel Newton's step can
+        # jump across the whole slip zone to sliding the other way and back (a cycle that
+        # never converges, and energy from nothing). Cut such a step where its slip comes
+        # closest to zero: inside the zone, where the next step sees the law's slope.
+        frac = 1.0
+        for i in range(nw):
+            sm, st = kap[i, 5], kap[i, 6]
+            if math.hypot(sm, st) < vslip:
+                continue
+            dsm = kap[i, 7] * dv0 + kap[i, 8] * dv1 + kap[i, 9] * dv2 - kap[i, 13] * kap[i, 14]
+            dst = kap[i, 10] * dv0 + kap[i, 11] * dv1 + kap[i, 12] * dv2
+            dd = dsm * dsm + dst * dst
+            if dd <= 0.0:
+                continue
+            t = -(sm * dsm + st * dst) / dd
+            if 0.0 < t < 1.0 and math.hypot(sm + t * dsm, st + t * dst) < vslip:
+                frac = min(frac, t)
+        dv0 *= frac
+        dv1 *= frac
+        dv2 *= frac
         y[0] += dv0
         y[1] += dv1
         y[2] += dv2
         big = max(abs(dv0), abs(dv1), abs(dv2) * b[B_RADIUS])
         for i in range(nw):
             if kap[i, 3] != 0.0:
-                dphi = gh * (kap[i, 0] * dv0 + kap[i, 1] * dv1 + kap[i, 2] * dv2) - kap[i, 4]
-                dphi *= kap[i, 3]
+                dphi = kap[i, 14] * frac
                 y[3 + i] += dphi
                 big = max(big, abs(dphi) * b[B_RADIUS])
-        if big <= NEWTON_TOL_M_S:
+        if big <= NEWTON_TOL_M_S and frac == 1.0:  # a cut step is no proof
             break
     return sig
 
@@ -365,7 +395,7 @@ def step_robots(
     dirs_all = np.zeros((n_rob, 2, n_w, 4))
     ys_all = np.zeros((n_rob, 4, 3 + n_w))
     ws_all = np.zeros((n_rob, 3, n_w))
-    kap_all = np.zeros((n_rob, n_w, 5))
+    kap_all = np.zeros((n_rob, n_w, NKAP))
     for d in prange(n_rob):  # robots are independent: one thread each, same result
         b = body[d]
         wh = wheel[d]
