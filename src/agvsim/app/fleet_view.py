@@ -208,7 +208,7 @@ class FleetSession(Session):
                 transport.close()
             broker, self.broker = self.broker, None
             if broker is not None:
-                time.sleep(0.2)  # let the broker hand the OFFLINE messages on
+                time.sleep(1.0)  # let the broker hand the OFFLINE messages on
                 broker.stop()
 
     def banner(self) -> list[str]:
