@@ -68,7 +68,7 @@ def _open(browser, app):
     pg.console = []  # type: ignore[attr-defined]
     pg.on("console", lambda m: pg.console.append(f"{m.type}: {m.text}"))
     pg.on("pageerror", lambda e: pg.console.append(f"pageerror: {e}"))
-    pg.goto(f"http://127.0.0.1:{app.port}/")
+    pg.goto(app.url)  # the per-launch token is in the URL
     pg.get_by_role("tab", name="Run").wait_for(timeout=120000)
     pg.wait_for_timeout(1000)
     return pg

@@ -136,6 +136,6 @@ def test_dragging_the_place_gizmo_moves_the_robot_to_the_nearest_free_pose():
         assert 0.0 < math.hypot(x - 2.0, y) < 1.5  # beside it, as near as it fits
         np.testing.assert_allclose(drag.handle.position, (x, y, GIZMO_Z_M))
         drag.hide()
-        assert drag.handle is None and drag.release(0.0, 0.0) == ""
+        assert not drag.shown and not drag.handle.visible and drag.release(0.0, 0.0) == ""
     finally:
         server.stop()

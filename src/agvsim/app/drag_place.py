@@ -40,15 +40,21 @@ class DragPlace:
             self.handle.on_update(self._on_update)
         else:
             self.handle.position = (x, y, GIZMO_Z_M)
+            self.handle.visible = True
 
     def _on_update(self, event: Any) -> None:
         if getattr(event, "phase", "end") == "end":  # let go: place it (not at every move)
             self.release(*self.handle.position[:2])
 
     def hide(self) -> None:
+        """Hidden, not removed (the browser may still address the node)."""
         if self.handle is not None:
-            self.handle.remove()
-        self.handle, self.robot = None, None
+            self.handle.visible = False
+        self.robot = None
+
+    @property
+    def shown(self) -> bool:
+        return self.handle is not None and self.robot is not None
 
     def release(self, x_m: float, y_m: float) -> str:
         """Let go at (x, y): the robot goes to the nearest free pose; returns the note shown."""

@@ -347,7 +347,7 @@ class Panel:
         if name not in self.session.robot_names() or name == self.selected:
             return
         self.selected = name
-        if getattr(self, "_drag", None) is not None and self._drag.handle is not None:
+        if getattr(self, "_drag", None) is not None and self._drag.shown:
             self._drag.show(name)  # the drag gizmo moves to the newly picked robot
         self._apply_note = ""
         self._build_mask(self.session.robot_config(name))
@@ -517,7 +517,7 @@ class Panel:
         t = -o[2] / d[2]
         note = self.session.move_robot(self.selected, o[0] + t * d[0], o[1] + t * d[1])
         self.world_msg.content = note
-        if self._drag.handle is not None:
+        if self._drag.shown:
             self._drag.show(self.selected)
 
     def _click_cell(self, origin: Any, direction: Any) -> None:
