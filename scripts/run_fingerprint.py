@@ -28,8 +28,19 @@ from typing import Any
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-TIMING_KEYS = {"wall_time_s", "real_time_factor", "elapsed_s", "wall_s", "started", "finished",
-               "started_at", "finished_at", "duration_wall_s", "steps_per_s", "runtime_s"}
+TIMING_KEYS = {
+    "wall_time_s",
+    "real_time_factor",
+    "elapsed_s",
+    "wall_s",
+    "started",
+    "finished",
+    "started_at",
+    "finished_at",
+    "duration_wall_s",
+    "steps_per_s",
+    "runtime_s",
+}
 
 
 def _h(data: bytes) -> str:
@@ -64,8 +75,9 @@ def _mcap_hash(path: Path) -> str:
 
 
 def _agvsim(*args: str) -> None:
-    subprocess.run([sys.executable, "-m", "agvsim", *args], check=True, cwd=ROOT,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, "-m", "agvsim", *args], check=True, cwd=ROOT, stdout=subprocess.DEVNULL
+    )
 
 
 def single_runs(tmp: Path) -> dict[str, str]:
@@ -77,8 +89,9 @@ def single_runs(tmp: Path) -> dict[str, str]:
         rel = f.relative_to(ROOT).as_posix()
         d = tmp / rel.replace("/", "_")
         duration = "30" if "slam" in f.name else "12"
-        _agvsim("run", rel, "--out", str(d), "--duration", duration, "--seed", "3",
-                "--no-plot", "-q")
+        _agvsim(
+            "run", rel, "--out", str(d), "--duration", duration, "--seed", "3", "--no-plot", "-q"
+        )
         out[f"run:{rel}:trajectory"] = _h((d / "trajectory.csv").read_bytes())
         out[f"run:{rel}:summary"] = _json_hash(d / "summary.json")
         out[f"run:{rel}:mcap"] = _mcap_hash(d / "run.mcap")
@@ -89,8 +102,18 @@ def single_runs(tmp: Path) -> dict[str, str]:
 def sweep_and_grade(tmp: Path) -> dict[str, str]:
     out: dict[str, str] = {}
     d = tmp / "sweep"
-    _agvsim("sweep", "examples/sweeps/avoid_speed_noise.yaml", "--out", str(d), "--limit", "6",
-            "--no-plot", "-q", "--workers", "1")
+    _agvsim(
+        "sweep",
+        "examples/sweeps/avoid_speed_noise.yaml",
+        "--out",
+        str(d),
+        "--limit",
+        "6",
+        "--no-plot",
+        "-q",
+        "--workers",
+        "1",
+    )
     import csv
 
     with (d / "results.csv").open() as f:
@@ -102,8 +125,15 @@ def sweep_and_grade(tmp: Path) -> dict[str, str]:
     )
     out["sweep:results"] = _h("\n".join(lines).encode())
     g = tmp / "grade"
-    _agvsim("grade", "examples/grading/student_wall_follower.py", "--suite",
-            "examples/grading/suite.yaml", "--out", str(g), "-q")
+    _agvsim(
+        "grade",
+        "examples/grading/student_wall_follower.py",
+        "--suite",
+        "examples/grading/suite.yaml",
+        "--out",
+        str(g),
+        "-q",
+    )
     for name in ("grades.json",):
         if (g / name).exists():
             out[f"grade:{name}"] = _json_hash(g / name)
@@ -145,7 +175,8 @@ def gym_rollouts() -> dict[str, str]:
             obs, _ = env.reset(seed=5)
         actions = {
             a: rng.uniform(env.action_space(a).low, env.action_space(a).high).astype(
-                env.action_space(a).dtype)
+                env.action_space(a).dtype
+            )
             for a in env.agents
         }
         obs, rew, term, trunc, _ = env.step(actions)
