@@ -94,8 +94,8 @@ def _yaml_problem(err: Exception, text: str) -> tuple[str, int | None]:
     problem = getattr(err, "problem", None)
     if problem is None and isinstance(err, yaml.reader.ReaderError):
         problem = f"character {err.character!r} is not allowed in YAML"  # type: ignore[attr-defined]
-    text = str(problem or err).strip().splitlines()
-    return (text[0] if text else type(err).__name__), line
+    lines = str(problem or err).strip().splitlines()
+    return (lines[0] if lines else type(err).__name__), line
 
 
 def _line(event: Any) -> int | None:

@@ -93,5 +93,5 @@ def hold_signals() -> Iterator[None]:
         for s, handler in previous.items():
             if handler is not None:  # None: a handler not set from Python, left as it is
                 signal.signal(s, handler)
-        for s in dict.fromkeys(pending):
-            signal.raise_signal(s)
+        for signum in dict.fromkeys(pending):
+            signal.raise_signal(signum)

@@ -6,13 +6,14 @@ import numpy as np
 
 from agvsim.control.api import BatchController, BatchObservation
 from agvsim.kinematics.actuation import forward_command
+from agvsim.kinematics.base import KinematicModel
 
 
 class WheelsFromTwist:
     """Wraps a batch controller that outputs twists ``(k, 3)`` and hands the engine driven
     wheel speeds (+ steering), computed with the robots' own inverse kinematics."""
 
-    def __init__(self, inner: BatchController, model: object):
+    def __init__(self, inner: BatchController, model: KinematicModel):
         self.inner, self.model = inner, model
 
     def reset(self, k: int, rng: np.random.Generator) -> None:

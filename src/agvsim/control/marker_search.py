@@ -282,7 +282,7 @@ class MarkerSearch:
         # the centre: where the ray through the crossing of the diagonals meets the wall
         # (the mean of the samples is off it in a slanted view)
         uc, vc = _diagonals_crossing(corners)
-        ray = pixels_to_robot(self.camera, [uc], [vc], [1.0])[0, :2] - cam
+        ray = pixels_to_robot(self.camera, np.array([uc]), np.array([vc]), np.ones(1))[0, :2] - cam
         centre = cam + ray * float(np.dot(normal, mean - cam) / np.dot(normal, ray))
         heading_r = math.atan2(-normal[1], -normal[0])  # facing the marker, robot frame
         cam_goal = centre + self.stop_distance_m * normal

@@ -120,8 +120,8 @@ def astar(
 
 def plan_path(
     cmap: ClearanceMap,
-    start_xy: Sequence[float],
-    goal_xy: Sequence[float],
+    start_xy: Sequence[float] | np.ndarray,
+    goal_xy: Sequence[float] | np.ndarray,
     half_width_m: float,
     clearance_m: float = 0.05,
     preferred_clearance_m: float = 1.0,

@@ -128,8 +128,11 @@ class KinematicModel(Protocol):
     has_steering: ClassVar[bool]  # True when the command includes a steering angle
     holonomic: ClassVar[bool]
 
-    wheel_radius_m: float | np.ndarray
-    max_wheel_speed_rad_s: float | np.ndarray
+    @property
+    def wheel_radius_m(self) -> float | np.ndarray: ...
+
+    @property
+    def max_wheel_speed_rad_s(self) -> float | np.ndarray: ...
 
     def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray: ...
 

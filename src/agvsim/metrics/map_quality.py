@@ -17,6 +17,7 @@ matched when a cell of the other set lies within ``tolerance_cells`` (Chebyshev 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -91,7 +92,10 @@ def map_iou(
     pred = np.zeros_like(surface)
     pred[ty[inside], tx[inside]] = True
     n_outside = int((~inside).sum())
-    out = {"map_cells": int(pred.sum()) + n_outside, "surface_cells": int(surface.sum())}
+    out: dict[str, Any] = {
+        "map_cells": int(pred.sum()) + n_outside,
+        "surface_cells": int(surface.sum()),
+    }
     for tol, key in ((tolerance_cells, "tolerant"), (0, "exact")):
         out[key] = _scores(pred, surface, n_outside, tol)
     out["tolerance_cells"] = int(tolerance_cells)

@@ -329,6 +329,7 @@ class TopView:
         if tab.count == 0:
             return
         view = self.view
+        assert view is not None, "the view is set when the image is drawn"
         pose = poses[tab.owner]
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         mx, my = tab.mount[:, 0], tab.mount[:, 1]
