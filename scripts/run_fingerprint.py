@@ -237,6 +237,11 @@ def fleet_in_process() -> dict[str, str]:
     return out
 
 
+def _prefixes(parts: set[str]) -> set[str]:
+    names = {"runs": {"run"}, "sweep": {"sweep", "grade"}, "gym": {"gym"}, "app": {"app"}}
+    return set().union(*(names.get(p, {p}) for p in parts))
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, help="write the fingerprints here (JSON)")
@@ -261,6 +266,8 @@ def main() -> int:
         args.out.write_text(json.dumps(fp, indent=1, sort_keys=True) + "\n")
     if args.compare:
         before = json.loads(args.compare.read_text())
+        if args.only:  # compare only the parts run now
+            before = {k: v for k, v in before.items() if k.split(":")[0] in _prefixes(parts)}
         keys = sorted(set(before) & set(fp))
         diff = [k for k in keys if before[k] != fp[k]]
         missing = sorted(set(before) ^ set(fp))
