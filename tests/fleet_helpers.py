@@ -16,6 +16,7 @@ from pathlib import Path
 import paho.mqtt.client as mqtt
 import pytest
 
+from agvsim.net import free_port
 from agvsim.world.lif import Layout
 
 STAMP = "2026-01-01T00:00:00.00Z"
@@ -137,12 +138,6 @@ class Master:
     def close(self) -> None:
         self.c.loop_stop()
         self.c.disconnect()
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def mosquitto_or_skip() -> str:

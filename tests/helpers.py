@@ -8,7 +8,8 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -52,3 +53,35 @@ def wait_for(cond: Callable[[], object], timeout_s: float = 15.0, what: str = "c
             return
         time.sleep(0.05)
     raise AssertionError(f"timed out waiting for {what}")
+
+
+@contextmanager
+def served_app(scenario_yaml: str, folder: Path) -> Iterator:
+    """The browser app serving ``scenario_yaml`` (written to ``folder``) on a free local port,
+    its loops running; stopped on exit. Calls :func:`need_browser` first."""
+    need_browser()
+    from agvsim.app.server import App, open_session
+    from agvsim.net import free_port
+
+    path = folder / "scenario.yaml"
+    path.write_text(scenario_yaml)
+    app = App(open_session(path), port=free_port()).start()
+    try:
+        yield app
+    finally:
+        app.stop()
+
+
+@contextmanager
+def chromium() -> Iterator:
+    """Debian's headless chromium driven by Playwright (never a downloaded browser)."""
+    from playwright.sync_api import sync_playwright
+
+    from agvsim.bench_app import FLAGS
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        try:
+            yield browser
+        finally:
+            browser.close()

@@ -11,9 +11,7 @@ import io
 import numpy as np
 import pytest
 
-from agvsim.bench_app import FLAGS, free_port
-
-from helpers import CHROMIUM, need_browser, wait_for
+from helpers import chromium, served_app, wait_for
 
 pytestmark = pytest.mark.slow  # a real browser
 
@@ -42,22 +40,13 @@ robots:
 
 @pytest.fixture(scope="module")
 def app(tmp_path_factory):
-    need_browser()
-    from agvsim.app.server import App, open_session
-
-    path = tmp_path_factory.mktemp("app") / "room.yaml"
-    path.write_text(ROOM)
-    a = App(open_session(path), port=free_port()).start()
-    yield a
-    a.stop()
+    with served_app(ROOM, tmp_path_factory.mktemp("app")) as a:
+        yield a
 
 
 @pytest.fixture(scope="module")
 def page(app):
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+    with chromium() as browser:
         pg = browser.new_page(viewport={"width": 1280, "height": 800})
         pg.errors = []  # type: ignore[attr-defined]
         pg.outside = []  # type: ignore[attr-defined]
@@ -74,7 +63,6 @@ def page(app):
         pg.get_by_role("tab", name="Run").wait_for(timeout=30000)
         pg.wait_for_timeout(1500)
         yield pg
-        browser.close()
 
 
 def canvas_shot(page) -> np.ndarray:

@@ -13,9 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agvsim.bench_app import FLAGS, free_port
-
-from helpers import CHROMIUM, need_browser, wait_for
+from helpers import chromium, served_app, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -52,14 +50,8 @@ robots:
 
 @pytest.fixture(scope="module")
 def app(tmp_path_factory):
-    need_browser()
-    from agvsim.app.server import App, open_session
-
-    path = tmp_path_factory.mktemp("app") / "room.yaml"
-    path.write_text(ROOM)
-    a = App(open_session(path), port=free_port()).start()
-    yield a
-    a.stop()
+    with served_app(ROOM, tmp_path_factory.mktemp("app")) as a:
+        yield a
 
 
 def _open(browser, app):
@@ -76,12 +68,8 @@ def _open(browser, app):
 
 @pytest.fixture(scope="module")
 def browser(app):
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+    with chromium() as b:
         yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")

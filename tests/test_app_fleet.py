@@ -139,9 +139,9 @@ def test_broker_is_refused_for_a_scenario_without_vehicles(tmp_path: Path) -> No
 def test_the_layout_is_drawn_in_the_scene_and_follows_a_loaded_scenario(tmp_path: Path) -> None:
     pytest.importorskip("viser")
     from agvsim.app.server import App, open_session
-    from agvsim.bench_app import free_port
     from agvsim.fleet.build import load_layout
     from agvsim.fleet.viz import layout_geometry
+    from agvsim.net import free_port
 
     path = room_scenario(tmp_path, [("agv1", "differential", "r4c1", 0.0)])
     text = path.read_text().split("vda5050:")[0]  # a layout, no vehicles: a plain session

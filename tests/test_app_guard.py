@@ -15,7 +15,7 @@ import websockets.exceptions
 from websockets.sync.client import connect
 
 from agvsim.app.guard import Guard, app_url, start_guarded
-from agvsim.bench_app import free_port
+from agvsim.net import free_port
 
 ROOM = """\
 name: room

@@ -120,7 +120,7 @@ def test_dragging_the_place_gizmo_moves_the_robot_to_the_nearest_free_pose():
     it, and the gizmo follows to where the robot really went."""
     viser = pytest.importorskip("viser")
     from agvsim.app.drag_place import GIZMO_Z_M, DragPlace
-    from agvsim.bench_app import free_port
+    from agvsim.net import free_port
 
     s = _session()
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)

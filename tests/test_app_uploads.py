@@ -274,7 +274,7 @@ def test_the_server_drops_an_oversized_upload_as_it_starts(live):
     from viser import _messages
 
     from agvsim.app.server import App
-    from agvsim.bench_app import free_port
+    from agvsim.net import free_port
 
     live.upload_limits = UploadLimits(max_upload_bytes=5000)
     app = App(live, port=free_port())

@@ -101,7 +101,7 @@ def test_recording_carries_on_across_edits_and_resets(tmp_path):
 def test_the_panel_shows_progress_and_where_the_files_went(tmp_path):
     pytest.importorskip("viser")
     from agvsim.app.server import App
-    from agvsim.bench_app import free_port
+    from agvsim.net import free_port
 
     said: list[str] = []
     session = Session(parse_scenario(scenario()), "test", out_dir=tmp_path)
@@ -131,7 +131,7 @@ def test_the_panel_shows_progress_and_where_the_files_went(tmp_path):
 
 
 def test_sigterm_to_the_server_finishes_the_video(tmp_path):
-    from agvsim.bench_app import free_port
+    from agvsim.net import free_port
 
     scen = tmp_path / "room.yaml"
     scen.write_text(yaml.safe_dump(scenario()))

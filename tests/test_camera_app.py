@@ -20,7 +20,7 @@ def app():
     pytest.importorskip("viser")
     from agvsim.app.server import App
     from agvsim.app.session import Session
-    from agvsim.bench_app import free_port
+    from agvsim.net import free_port
 
     data = load_scenario(ROOT / "scenarios" / "marker_search.yaml").model_dump(exclude_none=True)
     data["robots"].append(

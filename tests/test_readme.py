@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from agvsim.bench_app import free_port
+from agvsim.net import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -131,7 +131,7 @@ def test_a_recording_without_scenario_is_refused(tmp_path):
 
 def test_replay_app_draws_the_scene(played):
     from agvsim.app.replay import ReplayApp
-    from agvsim.bench_app import free_port
+    from agvsim.net import free_port
 
     path, snaps, _ = played
     s = ReplaySession(path)

@@ -11,7 +11,8 @@ import io
 import numpy as np
 import pytest
 
-from agvsim.bench_app import FLAGS, free_port
+from agvsim.bench_app import FLAGS
+from agvsim.net import free_port
 
 from helpers import CHROMIUM, need_browser, wait_for
 

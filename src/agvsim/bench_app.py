@@ -14,11 +14,11 @@ browser (Debian's headless Chromium, driven by Playwright, software WebGL) watch
 
 from __future__ import annotations
 
-import socket
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+from agvsim.net import free_port
 from agvsim.scenario import parse_scenario
 
 FLAGS = [
@@ -61,13 +61,6 @@ def _tiled_c1():
     from agvsim.world.mazes import thesis_maze, tile
 
     return tile(thesis_maze("thesis_c1"), 2, 2).occupied
-
-
-def free_port() -> int:
-    """A free TCP port on 127.0.0.1 (for the app in tests and benchmarks)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def run_app_benchmark(

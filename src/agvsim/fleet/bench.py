@@ -33,8 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from agvsim.fleet.broker import EmbeddedBroker, free_port
+from agvsim.fleet.broker import EmbeddedBroker
 from agvsim.fleet.run import FleetRun
+from agvsim.net import free_port
 from agvsim.scenario import parse_scenario
 from agvsim.world.lif import Edge, EdgeProps, Layout, Node, NodeProps, save_lif
 

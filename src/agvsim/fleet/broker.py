@@ -14,15 +14,10 @@ import asyncio
 import logging
 import multiprocessing as mp
 import os
-import socket
 import threading
 from typing import Any
 
-
-def free_port(host: str = "127.0.0.1") -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
+from agvsim.net import free_port
 
 
 def _config(host: str, port: int) -> dict:
