@@ -7,9 +7,9 @@ its own): one lock guards the simulation. Nothing here imports the viewer, so th
 logic is tested without a browser.
 
 Editing a robot ("apply" in the mask) rebuilds the simulation from the edited scenario and
-carries over the live state of every *other* robot (pose, odometry, wheel angles, counters) and
-the clock; the edited robot restarts at the pose given in the mask. Editing the maze changes
-the live simulation in place.
+carries over the live state of every *other* robot (``Simulation.carry_over``: pose, motion,
+wheels, steering, odometry, counters) and the clock; the edited robot restarts at the pose
+given in the mask. Editing the maze changes the live simulation in place.
 
 "Record video" (``start_video``) writes ``top.mp4`` and one MP4 per onboard camera, as
 ``agvsim run --video`` does, into a new folder ``<out_dir>/video_<k>``, a frame every 1/25 s of
@@ -144,33 +144,18 @@ class Session:
         ``fresh`` start at their initial pose if it is free, else at the nearest free pose.
         Returns a note for each fresh robot placed elsewhere."""
         new = self._build(cfg)
-        old = self.sim
-        st, ost = new.state, old.state
-        for i, r in enumerate(new.robots):
-            if r.name in fresh:
-                continue
-            try:
-                j = old.robot_index(r.name)
-            except (KeyError, ValueError):
-                continue
-            for name in (
-                "poses",
-                "odom_poses",
-                "wheel_angles",
-                "distance_m",
-                "collisions",
-                "wall_collisions",
-                "robot_collisions",
-            ):
-                getattr(st, name)[i] = getattr(ost, name)[j]
-        st.t_s, st.step = ost.t_s, ost.step
+        old = {r.name: j for j, r in enumerate(self.sim.robots)}
+        rows = {i: old[r.name] for i, r in enumerate(new.robots) if r.name in old}
+        new.carry_over(
+            self.sim.state, {i: j for i, j in rows.items() if new.robots[i].name not in fresh}
+        )
         notes = []
         for i, r in enumerate(new.robots):
             if r.name in fresh:
                 note = place_clear(new, i)
                 if note:
                     notes.append(note)
-        new._sense(force=True)
+        new.sense_now()
         self.config, self.sim = cfg, new
         old_hist = self.history
         self.history = {
@@ -514,9 +499,8 @@ class Session:
             spot = nearest_free_pose(self.sim, i, (float(x_m), float(y_m), th))
             if spot is None:
                 raise EditError(f"no free place for {name} within {MAX_SEARCH_M:g} m of that point")
-            self.sim.state.poses[i] = spot
-            self.sim.state.odom_poses[i] = spot
-            self.sim._sense(force=True)
+            self.sim.place(i, spot)
+            self.sim.sense_now()
             h = self.history.get(name)
             if h is not None:
                 h.trail.clear()
@@ -591,8 +575,7 @@ class Session:
             start_bad = bool(sim.collider.hit_walls(sim.footprints(at_start))[i])
             if stuck[i] or start_bad:
                 x, y = self.free_spot(seed=i + 17 * self.world_version)
-                sim.state.poses[i] = (x, y, sim.state.poses[i, 2])
-                sim.state.odom_poses[i] = sim.state.poses[i]
+                sim.place(i, (x, y, sim.state.poses[i, 2]))
                 fp = sim.footprints(sim.state.poses)
                 if start_bad:
                     rc["pose"] = {**rc.get("pose", {}), "x_m": x, "y_m": y}
