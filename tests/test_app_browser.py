@@ -185,12 +185,12 @@ def test_keyboard_drives_the_picked_robot(app, page):
     page.mouse.click(5, 400)  # focus the page, away from the panel's inputs
     for key in ("w", "w", "ArrowLeft"):
         page.keyboard.press(key)
-    wait_for(lambda: tuple(s._key_twist) == (0.2, 0.0, 0.25), what="the key presses")
+    wait_for(lambda: tuple(s.keyboard.twist) == (0.2, 0.0, 0.25), what="the key presses")
     s.step(25)
     assert s.sim.state.twists[0, 0] == pytest.approx(0.2)
     assert s.sim.state.twists[0, 2] == pytest.approx(0.25)
     page.keyboard.press("Space")
-    wait_for(lambda: not s._key_twist.any(), what="space to stop")
+    wait_for(lambda: not s.keyboard.twist.any(), what="space to stop")
     page.get_by_label("drive with keys").uncheck()
     wait_for(lambda: s.keyboard_robot is None, what="keyboard driving to stop")
     assert s.config["robots"][0]["controller"]["type"] == "script"

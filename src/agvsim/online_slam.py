@@ -43,7 +43,8 @@ class SlamResult:
 
 
 class OnlineSlam:
-    """Graph SLAM fed by one robot's lidar: call :meth:`update` after every simulation step."""
+    """Graph SLAM fed by one robot's lidar, an observer of the run (agvsim.run_loop): fed the
+    scan the robot has when it is made, then after every step (:meth:`on_step`)."""
 
     def __init__(self, sim: Simulation, robot: int, cfg: SlamBlock) -> None:
         self.sim, self.robot, self.cfg = sim, robot, cfg
@@ -68,6 +69,13 @@ class OnlineSlam:
         self.finished = False
         self._final_map: OccupancyMap | None = None
         self._result: SlamResult | None = None
+        self.update()
+
+    def on_step(self, sim: Simulation) -> None:
+        self.update()
+
+    def close(self) -> None:
+        """Nothing to write: the caller reads :meth:`results` or calls :meth:`write`."""
 
     def update(self) -> bool:
         """Feed the robot's newest scan if there is one; True when one was fed."""

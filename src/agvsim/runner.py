@@ -15,6 +15,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agvsim.record.outputs import TrajectoryWriter, summary, write_summary
+from agvsim.run_loop import (
+    Metrics,
+    Observer,
+    Progress,
+    Recording,
+    Rows,
+    Trail,
+    close_all,
+    run_loop,
+)
 from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
 from agvsim.scenario_limits import Limits, steps_of
 from agvsim.signals import StopRequest, Terminated, hold_signals, terminate_as_interrupt
@@ -95,39 +105,19 @@ def _run(
         n_steps = steps_of(total, sim.dt_s, sc._limits or Limits(), "duration")
     except ValueError as err:
         raise ScenarioError(source, [str(err)]) from None
-    metrics = build_metrics(sc, sim, source)
+    metrics = Metrics(build_metrics(sc, sim, source))
     slams = build_slams(sc, sim, source)
     writer = TrajectoryWriter(out / "trajectory.csv", sim, record_every)
-    observers = _observers(sc, sim, out, record_mcap, video, slams)  # run.mcap, videos
-    trail: dict[str, list] = {r.name: [] for r in sim.robots}
-    trail_every = max(1, n_steps // 4000)
+    observers: list[Observer] = _recorders(sc, sim, out, record_mcap, video, slams)
+    trail = Trail(sim, n_steps // 4000)
     status, error = "completed", None
     t0 = time.perf_counter()
     try:
-        writer.record()
-        for s in slams:
-            s.update()
-        with sim.enforcing_time_limit():  # of python controllers (agvsim.sim.watchdog)
-            for k in range(n_steps):
-                sim.step()
-                writer.record()
-                for o in observers:
-                    o.record()
-                for s in slams:
-                    s.update()
-                # a list, not a generator: every metric sees every step
-                if any([m.update(sim) for m in metrics.values()]):
-                    status = "ended_by_metric"
-                    break
-                if k % trail_every == 0:
-                    for i, r in enumerate(sim.robots):
-                        trail[r.name].append(sim.state.poses[i, :2].copy())
-                if progress is not None and (k % 50 == 0 or k == n_steps - 1):
-                    progress(sim.state.t_s, total)
-                if stop.requested:  # a SIGTERM whose exception a controller swallowed
-                    raise Terminated
-        if sim.errors:  # on_controller_error: stop_robot -- the others went on
-            status = "completed_with_controller_errors"
+        # in order: each sees the state the run starts from when made, then every step
+        observers = [Rows(writer), *observers, *slams, metrics, trail]
+        if progress is not None:
+            observers.append(Progress(progress, total, n_steps))
+        status = run_loop(sim, n_steps, observers, stop)
     except ControllerError as err:
         status, error = "controller_error", str(err)
         raise
@@ -139,8 +129,7 @@ def _run(
         wall = time.perf_counter() - t0
         with hold_signals():  # Ctrl-C / SIGTERM now wait until every output is written
             writer.close()
-            for o in observers:
-                o.close()
+            close_all(o for o in observers if not isinstance(o, Rows))
             data = summary(
                 sim,
                 wall,
@@ -153,12 +142,12 @@ def _run(
                     "trajectory_rows": writer.rows,
                 },
             )
-            data["metrics"] = {name: m.result() for name, m in metrics.items()}
+            data["metrics"] = metrics.results()
             if slams:
                 data["slam"] = {s.name: s.write(out) for s in slams}
             write_summary(out / "summary.json", data)
             if plot:
-                _plot(sim, trail, out / "plot.png", sc.name)
+                _plot(sim, trail.xy, out / "plot.png", sc.name)
                 if sim.dynamics is not None:  # wheel torque and slip (agvsim.dynamics)
                     _plot_wheels(sim, out, sc.name)
     return data
@@ -185,21 +174,21 @@ def build_metrics(sc: Scenario, sim: Simulation, source: str) -> dict:
     return out
 
 
-def _observers(
+def _recorders(
     sc: Scenario, sim: Simulation, out: Path, mcap: bool, video: bool, slams: list[OnlineSlam]
-) -> list:
-    """The run's recorders (``record()`` after each step, ``close()`` at the end, in order:
-    the final SLAM maps go into run.mcap before it closes)."""
-    found: list = []
+) -> list[Observer]:
+    """The run's recorders as observers, in order: the final SLAM maps go into run.mcap
+    before it closes. Each records the state the run starts from when made."""
+    found: list[Observer] = []
     if mcap:
         from agvsim.record.mcap_writer import Recorder, SlamMaps, scenario_yaml
 
         rec = Recorder(out / "run.mcap", sim, scenario_yaml(sc, sim.seed))
-        found += [SlamMaps(rec, slams), rec] if slams else [rec]
+        found += [Recording(SlamMaps(rec, slams)), Recording(rec)] if slams else [Recording(rec)]
     if video:
         from agvsim.viz.video import VideoRecorder
 
-        found.append(VideoRecorder(sim, out))
+        found.append(Recording(VideoRecorder(sim, out)))
     return found
 
 

@@ -171,10 +171,10 @@ class FleetSession(Session):
             self.link.tick(t)
             self.link.master.metrics.collisions = int(self.sim.state.robot_collisions.sum())
 
-    def _replace(self, cfg: dict[str, Any], fresh: set[str] = frozenset()) -> None:  # type: ignore[assignment]
+    def _replace(self, cfg: dict[str, Any], fresh: set[str] = frozenset()) -> list[str]:  # type: ignore[assignment]
         """A rebuilt fleet's vehicles start at their start nodes, with no order: every robot
         starts afresh (a live pose carried over would not match the vehicle's last node)."""
-        super()._replace(cfg, fresh={r["name"] for r in cfg.get("robots", [])})
+        return super()._replace(cfg, fresh={r["name"] for r in cfg.get("robots", [])})
 
     def _step_once(self) -> bool:
         ok = super()._step_once()

@@ -18,6 +18,7 @@ from agvsim.app.drag_place import DragPlace
 from agvsim.app.friction_brush import paint_friction
 from agvsim.app.mask import Field, MaskError, fields_in_error, mask_fields, robot_from_mask
 from agvsim.app.session import SPEEDS, EditError, Session
+from agvsim.app.view import RobotView
 from agvsim.kinematics import MODELS
 from agvsim.scenario import ScenarioError
 from agvsim.sim.spec import WALL_HEIGHT_M
@@ -99,7 +100,11 @@ class Panel:
         self._known_layout = session.layout
         for key, name in KEYS.items():
             cmd = gui.add_command(f"drive: {name}", hotkey=key)  # type: ignore[arg-type]
-            cmd.on_trigger(lambda _e, n=name: self._key(n))
+            cmd.on_trigger(self._key_command(name))
+
+    def _key_command(self, name: str) -> Callable[[Any], None]:
+        """The callback of the drive command for key ``name``."""
+        return lambda _event: self._key(name)
 
     # ------------------------------------------------------------------ run tab
     def _build_run(self) -> None:
@@ -159,9 +164,7 @@ class Panel:
         gui.add_markdown("**Scenario file**")
         save = gui.add_button("Save scenario (YAML)", icon=viser.Icon.DOWNLOAD)
         save.on_click(
-            lambda e: e.client.send_file_download(
-                "scenario.yaml", s.scenario_yaml().encode("utf-8")
-            )
+            lambda e: _download(e.client, "scenario.yaml", s.scenario_yaml().encode("utf-8"))
         )
         load = gui.add_upload_button(
             "Load scenario",
@@ -253,14 +256,10 @@ class Panel:
 
     def _camera_of_selected(self) -> tuple[np.ndarray, Any] | None:
         """(pose, CameraSpec) of the picked robot's first camera, or None."""
-        s = self.session
-        with s.lock:
-            try:
-                i = s.sim.robot_index(self.selected)
-            except (KeyError, ValueError):
-                return None
-            cams = s.sim.robots[i].cameras
-            return (s.sim.state.poses[i].copy(), cams[0]) if cams else None
+        robot = self.session.view(self.selected).robot
+        if robot is None or robot.camera is None:
+            return None
+        return robot.pose, robot.camera
 
     def add_client(self, client: Any) -> None:
         """A new browser tab: its own view dropdown (starting on the panoramic view, whatever
@@ -323,13 +322,10 @@ class Panel:
         riders = [c for c in clients if self.view_of.get(c.client_id) == ONBOARD]
         if not chasers and not riders:
             return
-        s = self.session
-        with s.lock:
-            try:
-                pose = s.sim.state.poses[s.sim.robot_index(self.selected)].copy()
-            except (KeyError, ValueError):
-                return
-        cam = shapes.camera_chase(pose)
+        robot = self.session.view(self.selected).robot
+        if robot is None:
+            return
+        cam = shapes.camera_chase(robot.pose)
         for c in chasers:
             self._place(c, cam)
         onboard = self._camera_of_selected()
@@ -492,7 +488,7 @@ class Panel:
         down = gui.add_button("Save map", icon=viser.Icon.DOWNLOAD)
         down.on_click(
             lambda e: self._world_do(
-                lambda: e.client.send_file_download(*s.save_grid(self.map_format.value))
+                lambda: _download(e.client, *s.save_grid(self.map_format.value))
             )
         )
 
@@ -557,47 +553,32 @@ class Panel:
         if self.selected not in names:
             self.selected = names[0]
         self.robot_pick.options = tuple(names)
-        self.robot_pick.value = self.selected
+        _show(self.robot_pick, self.selected)
         self._build_mask(s.robot_config(self.selected))
         self._plot_layout = None
-        self.keyboard.value = s.keyboard_robot is not None
+        _show(self.keyboard, s.keyboard_robot is not None)
 
     def _refresh_locked(self) -> None:
-        s = self.session
-        with s.lock:
-            names = s.robot_names()
-            layout = s.layout
-            st = s.sim.state
-            status = (
-                f"**t = {st.t_s:8.2f} s** &nbsp; {'playing' if s.playing else 'paused'}"
-                f" &nbsp; speed {s.speed_label}"
-            )
-            error = s.error
-        if layout != self._known_layout:
-            self._follow_layout(names, layout)
-        if self.speed.value != s.speed_label:
-            self.speed.value = s.speed_label
-        self.status.content = status + (("<br/>" + _error_md(error)) if error else "")
+        view = self.session.view(None)
+        status = (
+            f"**t = {view.t_s:8.2f} s** &nbsp; {'playing' if view.playing else 'paused'}"
+            f" &nbsp; speed {view.speed_label}"
+        )
+        if view.layout != self._known_layout:
+            self._follow_layout(list(view.robot_names), view.layout)
+        if self.speed.value != view.speed_label:
+            _show(self.speed, view.speed_label)
+        self.status.content = status + (("<br/>" + _error_md(view.error)) if view.error else "")
         self._refresh_video()
         self._refresh_view_options()
-        self._refresh_numbers()
-        self._refresh_camera()
+        robot = self.session.view(self.selected).robot  # after a new layout: the picked one
+        self._refresh_numbers(robot)
+        self._refresh_camera(robot)
 
-    def _refresh_camera(self) -> None:
+    def _refresh_camera(self, robot: RobotView | None) -> None:
         """The sensor camera view: the picked robot's latest camera frame under its numbers
         (refreshed with them, a few times a second); none when it has no camera."""
-        s = self.session
-        with s.lock:
-            sim = s.sim
-            frame = None
-            try:
-                i = sim.robot_index(self.selected)
-            except (KeyError, ValueError):
-                i = -1
-            if i >= 0 and sim.cameras is not None and sim.cameras.slots_of[i]:
-                c = sim.cameras.slots_of[i][0]
-                key = (id(sim), self.selected, int(sim.state.image_seq[c]))
-                frame = (sim.state.images[c], sim.cameras.specs[c].name, key)
+        frame = None if robot is None else robot.frame
         with self._gui_lock:
             if frame is None:
                 if self.camera_view is not None:
@@ -627,31 +608,20 @@ class Panel:
                 self.camera_view.image = img
             self._camera_key = key
 
-    def _refresh_numbers(self) -> None:
+    def _refresh_numbers(self, robot: RobotView | None) -> None:
+        if robot is None:
+            return
         with self._gui_lock:
-            self._refresh_numbers_locked()
+            self._refresh_numbers_locked(robot)
 
-    def _refresh_numbers_locked(self) -> None:
-        s = self.session
-        with s.lock:
-            sim = s.sim
-            try:
-                i = sim.robot_index(self.selected)
-            except (KeyError, ValueError):
-                return
-            spec, st = sim.robots[i], sim.state
-            wheels = list(spec.model.wheel_names)
-            ws = st.wheel_speeds[i, : len(wheels)].copy()
-            tw, pose = st.twists[i].copy(), st.poses[i].copy()
-            state = sim.active_states()[i]
-            coll = (int(st.wall_collisions[i]), int(st.robot_collisions[i]))
-            h = s.history.get(self.selected)
-            t = np.array(h.t) if h else np.zeros(0)
-            hw = np.array(h.wheels)[:, : len(wheels)] if h and len(h.wheels) else None
-            ht = np.array(h.twist) if h and len(h.twist) else None
+    def _refresh_numbers_locked(self, robot: RobotView) -> None:
+        wheels, ws = list(robot.wheel_names), robot.wheel_speeds
+        tw, pose, state = robot.twist, robot.pose, robot.state_name
+        coll = (robot.wall_collisions, robot.robot_collisions)
+        t, hw, ht = robot.history_t, robot.history_wheels, robot.history_twist
         rows = "".join(f"| {n} | {v:+.2f} |\n" for n, v in zip(wheels, ws, strict=True))
         self.numbers.content = (
-            f"**{self.selected}** ({spec.model.__class__.__name__}, {spec.mode.value})\n\n"
+            f"**{robot.name}** ({robot.model_name}, {robot.mode})\n\n"
             f"pose x {pose[0]:.2f} m, y {pose[1]:.2f} m, heading {np.degrees(pose[2]):.1f} deg\n\n"
             f"twist vx {tw[0]:+.2f} m/s, vy {tw[1]:+.2f} m/s, omega {tw[2]:+.2f} rad/s\n\n"
             f"state **{state}**, collisions: walls {coll[0]}, robots {coll[1]}\n\n"
@@ -669,7 +639,7 @@ class Panel:
         colors = ["#d62728", "#1f77b4", "#2ca02c", "#ff7f0e"]
         hw4 = np.zeros((len(t), 4))
         hw4[:, : hw.shape[1]] = hw
-        series = (
+        series: tuple[Any, ...] = (
             {"label": "t (s)"},
             *(
                 {"label": f"{wheels[k]} (rad/s)", "stroke": colors[k], "width": 2}
@@ -713,7 +683,21 @@ class Panel:
         self.plot_twist.data = (t, *ht.T)
 
 
-def pick_cell(session: Session, origin: np.ndarray, direction: np.ndarray):
+def _download(client: Any, name: str, data: bytes) -> None:
+    """Send a file to the browser tab that asked (none when it has closed)."""
+    if client is not None:
+        client.send_file_download(name, data)
+
+
+def _show(handle: Any, value: object) -> None:
+    """Set a GUI input's value (viser types its setter ``T | ndarray``, which mypy reads as a
+    read-only property)."""
+    handle.value = value
+
+
+def pick_cell(
+    session: Session, origin: np.ndarray, direction: np.ndarray
+) -> tuple[int, int] | None:
     """The maze cell a click ray points at: a wall whose top it crosses, else the floor cell
     under it. None when the ray misses the map."""
     if abs(direction[2]) < 1e-9 or direction[2] > 0:

@@ -57,21 +57,15 @@ def place_clear(sim: Simulation, i: int) -> str | None:
     """Put robot ``i`` at its initial pose if free, else at the nearest free pose (the pose
     and its odometry). Returns None when it stands at its initial pose, else what was done."""
     robot = sim.robots[i]
-    start = tuple(float(v) for v in robot.initial_pose)
-    x0, y0, th = start
-    why = blocker(sim, i, start)  # type: ignore[arg-type]
-    if why is None:
-        spot: tuple[float, float, float] | None = start  # type: ignore[assignment]
-    else:
-        spot = nearest_free_pose(sim, i, start)  # type: ignore[arg-type]
+    x0, y0, th = (float(v) for v in robot.initial_pose)
+    start = (x0, y0, th)
+    why = blocker(sim, i, start)
+    spot = start if why is None else nearest_free_pose(sim, i, start)
     if spot is None:
-        spot = start  # type: ignore[assignment]
         msg = f"{robot.name}: no free pose within {MAX_SEARCH_M:g} m of its initial pose"
-        sim.state.poses[i] = spot
-        sim.state.odom_poses[i] = spot
+        sim.place(i, start)
         return f"{msg} ({x0:.2f}, {y0:.2f}) (in the way: {why}); it starts there"
-    sim.state.poses[i] = spot
-    sim.state.odom_poses[i] = spot
+    sim.place(i, spot)
     if why is None:
         return None
     return (

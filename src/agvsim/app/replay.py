@@ -134,22 +134,21 @@ class ReplaySession:
         with self.lock:
             t = min(max(float(t_s), self.start_s), self.end_s)
             self.t_s = t
-            st = self.sim.state
             k = max(int(np.searchsorted(self.times, t + 1e-9, side="right")) - 1, 0)
-            if len(self.times):
-                st.poses = self.poses[k].copy()
-                st.twists = self.twists[k].copy()
-            st.t_s = t
+            scans: list = []
             for s, data in enumerate(self._scans):
                 if data is None:
                     continue
                 ts, ranges = data
                 j = int(np.searchsorted(ts, t + 1e-9, side="right")) - 1
-                if j >= 0:
-                    st.scans[s, : ranges.shape[1]] = ranges[j]
-                    st.scan_stamp[s] = ts[j]
-                else:
-                    st.scans[s] = np.inf
+                scans.append((s, ts[j], ranges[j]) if j >= 0 else (s, None, None))
+            recorded = len(self.times) > 0
+            self.sim.show_recorded(
+                t,
+                self.poses[k] if recorded else None,
+                self.twists[k] if recorded else None,
+                scans,
+            )
             g = max(int(np.searchsorted(self._map_t, t + 1e-9, side="right")) - 1, 0)
             if g != self._grid_index:
                 self._grid_index = g

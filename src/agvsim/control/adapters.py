@@ -23,4 +23,6 @@ class WheelsFromTwist:
         return forward_command(self.model, np.asarray(self.inner.step(obs), dtype=np.float64))
 
     def __getattr__(self, name: str):  # state names etc. come from the wrapped behaviour
+        if name == "inner":  # not set yet (copying, unpickling)
+            raise AttributeError(name)
         return getattr(self.inner, name)

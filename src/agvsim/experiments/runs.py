@@ -2,8 +2,9 @@
 ends it), and return the run's summary as one flat row. Nothing is written: the caller owns
 the files, so the same function runs in this process, in a process pool or in a Ray worker.
 
-The loop is the runner's (``agvsim.runner.run_scenario``) without the trajectory and the plot:
-the same scenario and seed give the same numbers as ``agvsim run --seed``.
+The loop is the runner's (:func:`agvsim.run_loop.run_loop`) with only the metrics and SLAM
+observing, no trajectory and no plot: the same scenario and seed give the same numbers as
+``agvsim run --seed``.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from agvsim.record.outputs import summary
+from agvsim.run_loop import Metrics, run_loop
 from agvsim.runner import CONTROLLER_TIME_LIMIT_S, build_metrics, build_slams
 from agvsim.scenario import Scenario, ScenarioError, build, parse_scenario
 from agvsim.sim.engine import ControllerError, Simulation
@@ -57,30 +59,18 @@ def execute(task: RunTask) -> dict:
 
 
 def _simulate(sc: Scenario, sim: Simulation, source: str) -> dict:
-    metrics = build_metrics(sc, sim, source)
+    metrics = Metrics(build_metrics(sc, sim, source))
     slams = build_slams(sc, sim, source)  # robots with a ``slam:`` block: scored, no files
     n_steps = int(round(float(sc.duration_s) / sim.dt_s))
-    status, error = "completed", None
+    error = None
     t0 = time.perf_counter()
-    for s in slams:
-        s.update()
     try:
-        with sim.enforcing_time_limit():  # of python controllers (agvsim.sim.watchdog)
-            for _ in range(n_steps):
-                sim.step()
-                for s in slams:
-                    s.update()
-                # a list, not a generator: every metric sees every step
-                if any([m.update(sim) for m in metrics.values()]):
-                    status = "ended_by_metric"
-                    break
-        if sim.errors:  # on_controller_error: stop_robot -- the others went on
-            status = "completed_with_controller_errors"
+        status = run_loop(sim, n_steps, [*slams, metrics])
     except ControllerError as err:
         status, error = "controller_error", str(err)
     wall = time.perf_counter() - t0
     data = summary(sim, wall, {"status": status, "error": error})
-    data["metrics"] = {name: m.result() for name, m in metrics.items()}
+    data["metrics"] = metrics.results()
     row = flatten(data)
     for s in slams:
         row.update(_flat(s.results().scores, f"slam.{s.name}"))

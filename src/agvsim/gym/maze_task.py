@@ -330,16 +330,12 @@ class MazeTask:
         """Put new episodes in ``worlds`` while the others run on: their mazes are redrawn and
         their robots moved to the start, at rest. Their observations come from the next
         ``step``, in which they are commanded to stand still."""
-        st = self.sim.state
         for k, ep in zip(worlds, episodes, strict=True):
             self._draw_tile(int(k), ep.maze_seed)
             self.goals[k] = self.room_centre(int(k), ep.goal_room)
             pose = self.start_pose(int(k), ep)
             self.sim.robots[k] = replace(self.sim.robots[k], initial_pose=pose)
-            st.poses[k] = st.odom_poses[k] = pose
-            for arr in (st.twists, st.wheel_speeds, st.steering, st.steer_angles):
-                arr[k] = 0.0
-            st.bump[k] = False
+            self.sim.place(int(k), pose, at_rest=True)
         self.sim.set_grid(self._grid())
 
     # ------------------------------------------------------------------ the step

@@ -2,7 +2,8 @@
 
 A :class:`~agvsim.sim.engine.Simulation` makes a ``CameraRig`` only when some robot has a
 camera, so runs without cameras pay nothing. Each step the rig renders the cameras whose time
-has come (``rate_hz``) and stores, per slot, in the simulation state:
+has come (``rate_hz``) and hands the frames to the engine, which stores, per slot, in the
+simulation state:
 
 * ``state.images[c]`` ``(H, W, 3)`` uint8 and ``state.depths[c]`` ``(H, W)`` float32 (read-only
   arrays, replaced by new ones at each frame, so a reference kept by a controller or a recorder
@@ -166,23 +167,20 @@ class CameraRig:
         return rgb.reshape(h, w, 3), depth.reshape(h, w)
 
     # ------------------------------------------------------------------ in a simulation
-    def reset(self, state) -> None:
-        """Blank frames (sky, inf) in ``state`` before the first render."""
-        state.images = []
-        state.depths = []
+    def blank_frames(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """One blank frame per camera (sky, inf depth), read-only: the state before the first
+        render."""
+        images: list[np.ndarray] = []
+        depths: list[np.ndarray] = []
         for spec in self.specs:
             img = np.empty((spec.height_px, spec.width_px, 3), dtype=np.uint8)
             img[:] = self.world.appearance.sky_rgb
             dep = np.full((spec.height_px, spec.width_px), np.inf, dtype=np.float32)
             img.setflags(write=False)
             dep.setflags(write=False)
-            state.images.append(img)
-            state.depths.append(dep)
-        c = self.count
-        state.image_stamp = np.zeros(c)
-        state.image_seq = np.zeros(c, dtype=np.int64)
-        state.image_pose = np.zeros((c, 3))
-        state.next_image_s = np.zeros(c)
+            images.append(img)
+            depths.append(dep)
+        return images, depths
 
     def render_due(
         self,
@@ -190,19 +188,20 @@ class CameraRig:
         footprints: np.ndarray,
         force: bool = False,
         rng: np.random.Generator | None = None,
-    ) -> int:
-        """Render every camera due at ``state.t_s`` (all when ``force``) into ``state``;
-        returns how many frames were rendered. Cameras with ``noise_std`` > 0 draw their pixel
+    ) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+        """Render every camera due at ``state.t_s`` (all when ``force``); returns the new
+        frames as ``(slot, rgb, depth, robot pose)``, read-only, for the engine to store (the
+        state is only read here). Cameras with ``noise_std`` > 0 draw their pixel
         noise from ``rng`` (the simulation's generator; slot order, so runs repeat)."""
         due = np.ones(self.count, bool) if force else state.t_s >= state.next_image_s - 1e-9
         if not due.any():
-            return 0
+            return []
         boxes = footprints
         if len(self.world.boxes):
             boxes = np.concatenate([footprints, self.world.boxes])
         boxes = np.ascontiguousarray(boxes, dtype=np.float64)
         btab = box_tables(boxes)
-        done = 0
+        done = []
         for slot in np.flatnonzero(due):
             pose = state.poses[self.owner[slot]]
             spec = self.specs[slot]
@@ -216,13 +215,7 @@ class CameraRig:
                 rgb = add_pixel_noise(rgb, spec.noise_std, rng)
             rgb.setflags(write=False)
             depth.setflags(write=False)
-            state.images[slot] = rgb
-            state.depths[slot] = depth
-            state.image_stamp[slot] = state.t_s
-            state.image_seq[slot] += 1
-            state.image_pose[slot] = pose
-            state.next_image_s[slot] = state.t_s + self.period_s[slot]
-            done += 1
+            done.append((int(slot), rgb, depth, pose))
         return done
 
     def marker_views(self, state, slot: int) -> list[MarkerView]:

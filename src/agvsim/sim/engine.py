@@ -12,6 +12,7 @@ Each step, for every robot together (structure of arrays, a loop over model kind
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
@@ -41,7 +42,7 @@ from agvsim.sim import observe
 from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.kernels import move_bodies, pair_faults
 from agvsim.sim.spec import ControlMode, RobotSpec, World
-from agvsim.sim.state import SensorTable, SimState  # noqa: F401 - SensorTable in hints
+from agvsim.sim.state import ROBOT_ROWS, SensorTable, SimState  # noqa: F401 - in hints
 from agvsim.sim.watchdog import ControllerClock, TimeLimitExceeded, check_limit
 from agvsim.world.grid import OccupancyGrid
 
@@ -119,16 +120,18 @@ class Simulation:
         self.on_controller_error = on_controller_error
         self.controller_time_limit_s = controller_time_limit_s
         index = {n: k for k, n in enumerate(names)}
-        self._knows: list[list[int]] = [[] for _ in robots]
+        #: robot index -> the robots whose true pose it is given (``knows:``)
+        self.knows: list[list[int]] = [[] for _ in robots]
         for who, whom in (knows or {}).items():
             for other in whom:
                 if who not in index or other not in index:
                     raise ValueError(
                         f"knows: unknown robot in {who!r} -> {other!r}; robots: {names}"
                     )
-                self._knows[index[who]].append(index[other])
+                self.knows[index[who]].append(index[other])
         self.bindings = list(controllers)
-        self._binding_idx = [np.asarray(b.robots, dtype=np.int64) for b in self.bindings]
+        #: the robots of each binding, as index arrays
+        self.binding_robots = [np.asarray(b.robots, dtype=np.int64) for b in self.bindings]
         self.n = len(self.robots)
         self.caster = RayCaster(world.grid)
         self.collider = Collider(world.grid)
@@ -150,6 +153,8 @@ class Simulation:
         self._radius = np.array([r.bounding_radius_m for r in self.robots])
         self._substep_len = 0.5 * min(world.grid.resolution_m, float(hl_hw.min()))
         self._static_tab = box_tables(world.boxes)
+        self._mode_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
+        self._batch_slots: dict[bytes, dict[str, tuple[slice | np.ndarray, int]]] = {}
         self.reset(seed)
 
     # ------------------------------------------------------------------ set-up
@@ -197,31 +202,44 @@ class Simulation:
         m = self.robots[i].model
         return len(m.driven_wheels) + int(m.has_steering)
 
-    def reset(self, seed: int | None = None) -> None:
-        """Back to the initial poses at t = 0 with a fresh generator; senses once."""
+    @property
+    def rng(self) -> np.random.Generator:
+        """The simulation's generator (in the state: snapshots and restores carry it)."""
+        return self.state.rng
+
+    @property
+    def errors(self) -> list[ControllerError]:
+        """The controller errors of this run so far (``on_controller_error: stop_robot``)."""
+        return self.state.errors
+
+    def reset(self, seed: int | None = None, poses: np.ndarray | None = None) -> None:
+        """Back to t = 0 with a fresh generator from ``seed`` (default: the last one), the
+        robots at ``poses`` ``(N, 3)`` (default: their initial poses) and at rest; controllers
+        are reset; senses and renders once."""
         if seed is not None:
             self.seed = seed
-        self.rng = np.random.default_rng(self.seed)
         n = self.n
-        poses = np.array([r.initial_pose for r in self.robots], dtype=np.float64)
-        self.state = SimState.zeros(n, self.sensors, W_MAX, S_MAX, poses)
+        if poses is None:
+            start = np.array([r.initial_pose for r in self.robots], dtype=np.float64)
+        else:
+            start = np.array(poses, dtype=np.float64)
+            if start.shape != (n, 3) or not np.isfinite(start).all():
+                raise ValueError(f"reset: poses must be ({n}, 3) finite numbers, got {poses!r}")
+        rng = np.random.default_rng(self.seed)
+        self.state = SimState.zeros(n, self.sensors, W_MAX, S_MAX, start, rng, self._mode_twist)
+        st = self.state
         if self.dynamics is not None:
-            self.dynamics.reset(self.state.steering[self.dynamics.idx])
-            st = self.state
+            self.dynamics.reset(st.steering[self.dynamics.idx])
             st.wheel_torque_nm, st.wheel_slip_m_s, st.wheel_power_w = np.zeros((3, n, W_MAX))
         if self.cameras is not None:
-            self.cameras.reset(self.state)
-        # command buffers: twist (N, 3) and wheels (N, 3 = up to 4 driven? ) per robot
-        self._cmd_twist = np.zeros((n, 3))
-        self._cmd_wheels = np.zeros((n, W_MAX + 1))
-        self._mode_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
-        self._cmd_is_twist = self._mode_twist.copy()
-        self._batch_slots: dict[bytes, dict[str, tuple[slice | np.ndarray, int]]] = {}
-        self.errors: list[ControllerError] = []
+            c = self.cameras.count
+            st.images, st.depths = self.cameras.blank_frames()
+            st.image_stamp, st.image_seq = np.zeros(c), np.zeros(c, dtype=np.int64)
+            st.image_pose, st.next_image_s = np.zeros((c, 3)), np.zeros(c)
         for b in self.bindings:
             try:
                 if b.batch:
-                    b.controller.reset(len(b.robots), self.rng)
+                    b.controller.reset(len(b.robots), rng)
                 elif hasattr(b.controller, "reset"):
                     b.controller.reset()
             except KeyboardInterrupt:
@@ -231,6 +249,88 @@ class Simulation:
                 raise ControllerError(who, 0.0, exc) from exc
         self._sense(force=True)
         self._render(force=True)
+
+    # ------------------------------------------------------------------ changing the state
+    def place(self, i: int, pose: Sequence[float] | np.ndarray, at_rest: bool = False) -> None:
+        """Put robot ``i`` at ``pose`` (x, y, theta) now, its odometry with it (a user moving
+        it, a new episode); ``at_rest``: also stopped (no twist, wheel speed or steering, no
+        bump). Sensors keep their readings until they fire next (see :meth:`sense_now`)."""
+        p = np.asarray(pose, dtype=np.float64)
+        if p.shape != (3,) or not np.isfinite(p).all():
+            raise ValueError(f"place: pose must be 3 finite numbers (x, y, theta), got {pose!r}")
+        st = self.state
+        st.poses[i] = p
+        st.odom_poses[i] = p
+        if at_rest:
+            for rows in (st.twists, st.wheel_speeds, st.steering, st.steer_angles):
+                rows[i] = 0.0
+            st.bump[i] = st.bump_wall[i] = st.bump_robot[i] = False
+
+    def show_recorded(
+        self,
+        t_s: float,
+        poses: np.ndarray | None = None,
+        twists: np.ndarray | None = None,
+        scans: Sequence[tuple[int, float, np.ndarray] | tuple[int, None, None]] = (),
+    ) -> None:
+        """Show recorded data instead of simulating (a replay): the clock at ``t_s``, the
+        robots at ``poses`` with ``twists`` ``(N, 3)`` where given, and each ``(slot, stamp,
+        ranges)`` of ``scans`` as sensor ``slot``'s latest reading (``(slot, None, None)``: no
+        reading yet, all inf)."""
+        st = self.state
+        if poses is not None:
+            st.poses = np.array(poses, dtype=np.float64)
+        if twists is not None:
+            st.twists = np.array(twists, dtype=np.float64)
+        st.t_s = float(t_s)
+        for slot, stamp, ranges in scans:
+            if stamp is None or ranges is None:
+                st.scans[slot] = np.inf
+            else:
+                st.scans[slot, : len(ranges)] = ranges
+                st.scan_stamp[slot] = stamp
+
+    def sense_now(self) -> None:
+        """Cast every sensor now, due or not (after :meth:`place`, an edit of the walls)."""
+        self._sense(force=True)
+
+    def carry_over(self, old: SimState, rows: dict[int, int]) -> None:
+        """Continue another simulation's run (this one rebuilt from an edited scenario): its
+        clock, and for each ``rows[i] = j`` robot ``i`` takes the physical state of robot ``j``
+        of ``old`` (pose, motion, wheels, steering, odometry, counters: ``ROBOT_ROWS``)."""
+        st = self.state
+        for i, j in rows.items():
+            for name in ROBOT_ROWS:
+                getattr(st, name)[i] = getattr(old, name)[j]
+        st.t_s, st.step = old.t_s, old.step
+
+    def snapshot(self) -> Snapshot:
+        """The whole changing state now (robots, commands, sensors, generator, dynamics and
+        the controllers' memory), for :meth:`restore`. Controllers are deep-copied; one that
+        cannot be copied raises ValueError naming its robots."""
+        ctrls = []
+        for b in self.bindings:
+            try:
+                ctrls.append(copy.deepcopy(b.controller))
+            except Exception as err:  # noqa: BLE001 - user code may hold anything
+                who = ",".join(self.robots[i].name for i in b.robots)
+                raise ValueError(
+                    f"snapshot: the controller of robot {who!r} cannot be copied: {err}"
+                ) from None
+        dyn = None if self.dynamics is None else copy.deepcopy(self.dynamics)
+        return Snapshot(self.state.copy(), tuple(ctrls), dyn)
+
+    def restore(self, snap: Snapshot) -> None:
+        """Back to ``snap`` (from :meth:`snapshot` of this simulation); it can be restored
+        again. The world (walls, boxes, floor) stays as it is now."""
+        if len(snap.controllers) != len(self.bindings) or snap.state.poses.shape[0] != self.n:
+            raise ValueError("restore: the snapshot is of another simulation")
+        self.state = snap.state.copy()
+        for b, ctrl in zip(self.bindings, snap.controllers, strict=True):
+            b.controller = copy.deepcopy(ctrl)
+        if snap.dynamics is not None:
+            self.dynamics = copy.deepcopy(snap.dynamics)
+            self.dynamics.set_floor(self.world.floor)
 
     # ------------------------------------------------------------------ the step
     def step(self) -> None:
@@ -273,7 +373,7 @@ class Simulation:
         st = self.state
         clock = self._clock if self._clock is not None and self._clock.running else None
         try:
-            for b, idx in zip(self.bindings, self._binding_idx, strict=True):
+            for b, idx in zip(self.bindings, self.binding_robots, strict=True):
                 live = idx[~st.stopped[idx]]
                 if live.size == 0:
                     continue
@@ -309,10 +409,10 @@ class Simulation:
         st = self.state
         robots = idx if idx is not None else np.array([self.robot_index(err.robot)])
         st.stopped[robots] = True
-        self._cmd_twist[robots] = 0.0
-        self._cmd_wheels[robots] = 0.0
-        self._cmd_is_twist[robots] = True
-        self.errors.append(err)
+        st.cmd_twist[robots] = 0.0
+        st.cmd_wheels[robots] = 0.0
+        st.cmd_is_twist[robots] = True
+        st.errors.append(err)
         if self.on_controller_error == "stop_run":
             raise err
 
@@ -342,12 +442,13 @@ class Simulation:
                 self.state.t_s,
                 ValueError(f"command {cmd[k].tolist()} is not all finite numbers"),
             )
+        st = self.state
         is_tw = self._mode_twist[idx]
-        self._cmd_is_twist[idx] = is_tw
+        st.cmd_is_twist[idx] = is_tw
         if is_tw.any():
-            self._cmd_twist[idx[is_tw]] = cmd[is_tw, :3]
+            st.cmd_twist[idx[is_tw]] = cmd[is_tw, :3]
         if not is_tw.all():
-            self._cmd_wheels[idx[~is_tw], : cmd.shape[1]] = cmd[~is_tw]
+            st.cmd_wheels[idx[~is_tw], : cmd.shape[1]] = cmd[~is_tw]
 
     def _control_one(self, ctrl: object, i: int) -> None:
         obs = self.observation(i)
@@ -374,18 +475,19 @@ class Simulation:
         arr = arr[:width]
         if arr.shape != (width,) or not np.all(np.isfinite(arr)):
             raise ValueError(f"command {arr.tolist()} is not {width} finite numbers ({mode} mode)")
-        self._cmd_is_twist[i] = is_twist
+        st = self.state
+        st.cmd_is_twist[i] = is_twist
         if is_twist:
-            self._cmd_twist[i] = arr
+            st.cmd_twist[i] = arr
         else:
-            self._cmd_wheels[i, :width] = arr
+            st.cmd_wheels[i, :width] = arr
 
     def _actuate(self) -> np.ndarray:
         """Commands -> executed twists (N, 3); fills wheel speeds and steering in the state."""
         st, dt = self.state, self.dt_s
         twist = np.zeros((self.n, 3))
         for g in self._groups:
-            is_tw = self._cmd_is_twist[g.idx]
+            is_tw = st.cmd_is_twist[g.idx]
             for sel, by_twist in ((is_tw, True), (~is_tw, False)):
                 if not sel.any():
                     continue
@@ -393,9 +495,9 @@ class Simulation:
                 idx = g.sel if whole else g.idx[sel]
                 model = g.model if whole else _subset(g.model, sel)
                 if by_twist:
-                    a = actuation.from_twist(model, self._cmd_twist[idx], st.steering[idx], dt)
+                    a = actuation.from_twist(model, st.cmd_twist[idx], st.steering[idx], dt)
                 else:
-                    w = self._cmd_wheels[idx]
+                    w = st.cmd_wheels[idx]
                     steer = w[:, g.n_drive] if model.has_steering else np.zeros(len(w))
                     a = actuation.from_wheels(model, w[:, : g.n_drive], steer, st.steering[idx], dt)
                 twist[idx] = a.twist
@@ -517,7 +619,8 @@ class Simulation:
 
     def _dead_reckon(self, twist: np.ndarray) -> None:
         """Integrate noisy wheel-encoder readings into the odometry pose."""
-        st, rng = self.state, self.rng
+        st = self.state
+        rng = st.rng
         for g in self._groups:
             sel = g.sel
             drive = st.wheel_speeds[sel, g.driven]
@@ -575,8 +678,17 @@ class Simulation:
 
     def _render(self, force: bool = False) -> None:
         """Render the cameras that are due (see :mod:`agvsim.sensors.camera_rig`)."""
-        if self.cameras is not None:
-            self.cameras.render_due(self.state, self.footprints(self.state.poses), force, self.rng)
+        if self.cameras is None:
+            return
+        st = self.state
+        due = self.cameras.render_due(st, self.footprints(st.poses), force, st.rng)
+        for slot, rgb, depth, pose in due:
+            st.images[slot] = rgb
+            st.depths[slot] = depth
+            st.image_stamp[slot] = st.t_s
+            st.image_seq[slot] += 1
+            st.image_pose[slot] = pose
+            st.next_image_s[slot] = st.t_s + self.cameras.period_s[slot]
 
     def camera_frames(self) -> list[CameraFrame]:
         """The latest frame of every camera of every robot (empty without cameras)."""
@@ -597,11 +709,28 @@ class Simulation:
         ``state_name`` (one robot) or ``state_names()`` (a batch controller)."""
         return observe.active_states(self)
 
+    def batch_slots(self, idx: np.ndarray) -> dict[str, tuple[slice | np.ndarray, int]]:
+        """Sensor name -> (rows of the sensor table, beams) for the robots ``idx`` of a batch
+        controller: the sensors all of them have (worked out once per set of robots)."""
+        key = idx.tobytes()
+        if key not in self._batch_slots:
+            self._batch_slots[key] = observe.batch_slots(self.sensors, idx)
+        return self._batch_slots[key]
+
     def robot_index(self, name: str) -> int:
         for i, r in enumerate(self.robots):
             if r.name == name:
                 return i
         raise KeyError(f"no robot named {name!r}; robots: {[r.name for r in self.robots]}")
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The changing state of a simulation at one moment (``Simulation.snapshot``)."""
+
+    state: SimState
+    controllers: tuple[Any, ...]  # deep copies, one per binding
+    dynamics: Dynamics | None  # a copy of the motors' and bodies' memory, if any
 
 
 def _subset(model: Any, sel: np.ndarray) -> Any:

@@ -66,7 +66,7 @@ def observation(sim: Simulation, i: int) -> Observation:
         wheel_speeds=st.wheel_speeds[i, :w].copy(),
         bump=bool(st.bump[i]),
         true_pose=st.poses[i].copy(),
-        others={sim.robots[j].name: st.poses[j].copy() for j in sim._knows[i]},
+        others={sim.robots[j].name: st.poses[j].copy() for j in sim.knows[i]},
         model=robot.model,
         mode=str(robot.mode),
         dt_s=sim.dt_s,
@@ -77,17 +77,8 @@ def observation(sim: Simulation, i: int) -> Observation:
 
 
 def batch_observation(sim: Simulation, idx: np.ndarray) -> BatchObservation:
-    st, tab = sim.state, sim.sensors
-    key = idx.tobytes()
-    if key not in sim._batch_slots:  # which sensor slots each name maps to, once
-        sim._batch_slots[key] = {
-            name: (
-                _rows(slots := np.array([tab.slot(int(i), name) for i in idx])),
-                tab.specs[int(slots[0])].num_beams,
-            )
-            for name in tab.common_names(idx)
-        }
-    ranges = _LazyRanges(st.scans, sim._batch_slots[key], tab)
+    st = sim.state
+    ranges = _LazyRanges(st.scans, sim.batch_slots(idx))
     return BatchObservation(
         t_s=st.t_s,
         robots=idx,
@@ -98,11 +89,23 @@ def batch_observation(sim: Simulation, idx: np.ndarray) -> BatchObservation:
     )
 
 
+def batch_slots(tab: SensorTable, idx: np.ndarray) -> dict[str, tuple[slice | np.ndarray, int]]:
+    """Sensor name -> (its rows of the sensor table, beams) for the robots ``idx``: the
+    sensors every one of them has with the same beam count."""
+    return {
+        name: (
+            _rows(slots := np.array([tab.slot(int(i), name) for i in idx])),
+            tab.specs[int(slots[0])].num_beams,
+        )
+        for name in tab.common_names(idx)
+    }
+
+
 def active_states(sim: Simulation) -> list[str]:
     """Each robot's active controller state ("" when its controller has none): read from
     ``state_name`` (one robot) or ``state_names()`` (a batch controller)."""
     out = [""] * sim.n
-    for b, idx in zip(sim.bindings, sim._binding_idx, strict=True):
+    for b, idx in zip(sim.bindings, sim.binding_robots, strict=True):
         ctrl = b.controller
         if b.batch and hasattr(ctrl, "state_names"):
             for i, name in zip(idx, ctrl.state_names(), strict=False):
@@ -126,10 +129,8 @@ def _rows(slots: np.ndarray) -> slice | np.ndarray:
 class _LazyRanges(Mapping):
     """sensor name -> (k, B) readings, gathered only when a controller asks for them."""
 
-    def __init__(
-        self, scans: np.ndarray, slots: dict[str, tuple[slice | np.ndarray, int]], tab: SensorTable
-    ):
-        self._scans, self._slots, self._tab = scans, slots, tab
+    def __init__(self, scans: np.ndarray, slots: dict[str, tuple[slice | np.ndarray, int]]):
+        self._scans, self._slots = scans, slots
 
     def __getitem__(self, name: str) -> np.ndarray:
         rows, width = self._slots[name]

@@ -1,9 +1,15 @@
-"""The changing state of a simulation (a handful of arrays) and the flat sensor table."""
+"""The changing state of a simulation (a handful of arrays) and the flat sensor table.
+
+Only the engine (:mod:`agvsim.sim.engine`) writes a ``SimState``; everyone else reads it, and
+changes it through the engine's methods (``place``, ``reset``, ``restore``, ...).
+"""
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -99,8 +105,32 @@ class SensorTable:
         return out
 
 
+#: the per-robot rows of the physical state, carried over when a simulation is rebuilt with
+#: the same robot (``Simulation.carry_over``): pose, motion, wheels, odometry and counters
+ROBOT_ROWS = (
+    "poses",
+    "twists",
+    "wheel_speeds",
+    "wheel_angles",
+    "steering",
+    "steer_angles",
+    "odom_poses",
+    "bump",
+    "bump_wall",
+    "bump_robot",
+    "collisions",
+    "wall_collisions",
+    "robot_collisions",
+    "distance_m",
+)
+
+
 @dataclass
 class SimState:
+    """Everything that changes from one step to the next: the robots, the commands waiting
+    to be actuated, the sensors' latest readings and timers, the cameras' frames, the random
+    generator and the controller errors so far. Copy it with :meth:`copy`."""
+
     t_s: float
     step: int
     poses: np.ndarray  # (N, 3) x, y, theta: ground truth, world frame
@@ -121,6 +151,12 @@ class SimState:
     scans: np.ndarray  # (S, B_max) latest readings per sensor slot
     scan_stamp: np.ndarray  # (S,) time of the latest reading
     next_scan_s: np.ndarray  # (S,) when each sensor fires next
+    # commands of the last control stage, read by the actuation stage
+    cmd_twist: np.ndarray  # (N, 3) vx, vy, omega (inverse mode)
+    cmd_wheels: np.ndarray  # (N, W_max + 1) driven wheel speeds, then steering (forward mode)
+    cmd_is_twist: np.ndarray  # (N,) bool: which of the two holds the robot's command
+    rng: np.random.Generator  # sensor and encoder noise, controllers' randomness
+    errors: list[Any] = field(default_factory=list)  # ControllerErrors so far, in order
     # cameras (C slots, agvsim.sensors.camera_rig; empty without cameras): latest frames
     images: list[np.ndarray] = field(default_factory=list)  # (H, W, 3) uint8 each, read-only
     depths: list[np.ndarray] = field(default_factory=list)  # (H, W) float32 z-depth m each
@@ -136,7 +172,14 @@ class SimState:
 
     @classmethod
     def zeros(
-        cls, n: int, sensors: SensorTable, w_max: int, s_max: int, poses: np.ndarray
+        cls,
+        n: int,
+        sensors: SensorTable,
+        w_max: int,
+        s_max: int,
+        poses: np.ndarray,
+        rng: np.random.Generator,
+        cmd_is_twist: np.ndarray,
     ) -> SimState:
         s, b = sensors.count, sensors.max_beams
         return cls(
@@ -160,4 +203,24 @@ class SimState:
             scans=np.full((s, b), np.inf),
             scan_stamp=np.zeros(s),
             next_scan_s=np.zeros(s),
+            cmd_twist=np.zeros((n, 3)),
+            cmd_wheels=np.zeros((n, w_max + 1)),
+            cmd_is_twist=cmd_is_twist.copy(),
+            rng=rng,
         )
+
+    def copy(self) -> SimState:
+        """An independent copy: arrays copied, the generator at the same point of its stream.
+        Camera frames are shared (they are read-only and replaced, never written in place)."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                out[f.name] = v.copy()
+            elif isinstance(v, np.random.Generator):
+                out[f.name] = copy.deepcopy(v)
+            elif isinstance(v, list):
+                out[f.name] = list(v)
+            else:
+                out[f.name] = v
+        return SimState(**out)
