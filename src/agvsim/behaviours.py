@@ -27,8 +27,9 @@ import time
 from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from agvsim.config_base import StrictConfig
 from agvsim.control.api import ControllerContext
 from agvsim.control.explorer import TremauxExplorer
 from agvsim.control.goal import GoToGoal
@@ -39,24 +40,15 @@ from agvsim.control.pure_pursuit import PurePursuit
 from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
 from agvsim.control.wall_follow import WallFollower
-from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
 from agvsim.world.loaders import MAX_CELLS
 
 _Cell = Annotated[int, Field(ge=0, le=10_000_000)]  # numba takes 64-bit integers only
 
 
-class _Config(BaseModel):
-    """Every behaviour config: unknown keys, NaN / inf, huge numbers and long text refused."""
+class _Config(StrictConfig):
+    """Every behaviour config: a strict block whose texts (names of sensors, robots) are short."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=200)
-
-    @field_validator("*")
-    @classmethod
-    def _not_huge(cls, value: Any) -> Any:
-        if (bad := too_large(value)) is not None:
-            item = f"{bad!r} is " if isinstance(value, list | tuple) else ""
-            raise ValueError(f"{item}too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
-        return value
+    model_config = ConfigDict(str_max_length=200)
 
 
 # ---------------------------------------------------------------------------------- goal
@@ -66,16 +58,18 @@ class GoalConfig(_Config):
     type: Literal["goto_goal"]
     goal_x_m: float
     goal_y_m: float
-    tolerance_m: float = Field(0.1, gt=0, le=100)
-    max_speed_m_s: float = Field(0.8, gt=0, le=100)
-    max_turn_rate_rad_s: float = Field(1.5, gt=0, le=100)
-    heading_kp: float = Field(2.5, ge=0)
-    heading_ki: float = Field(0.2, ge=0)
-    heading_kd: float = Field(0.05, ge=0)
-    speed_kp: float = Field(0.8, ge=0)
-    speed_ki: float = Field(0.05, ge=0)
-    speed_kd: float = Field(0.0, ge=0)
-    goal_heading_deg: float | None = Field(None, description="holonomic models turn to this")
+    tolerance_m: float = Field(default=0.1, gt=0, le=100)
+    max_speed_m_s: float = Field(default=0.8, gt=0, le=100)
+    max_turn_rate_rad_s: float = Field(default=1.5, gt=0, le=100)
+    heading_kp: float = Field(default=2.5, ge=0)
+    heading_ki: float = Field(default=0.2, ge=0)
+    heading_kd: float = Field(default=0.05, ge=0)
+    speed_kp: float = Field(default=0.8, ge=0)
+    speed_ki: float = Field(default=0.05, ge=0)
+    speed_kd: float = Field(default=0.0, ge=0)
+    goal_heading_deg: float | None = Field(
+        default=None, description="holonomic models turn to this"
+    )
     pose_source: PoseSource = "true_pose"
 
 
@@ -85,10 +79,10 @@ class WaypointsConfig(_Config):
     type: Literal["waypoints"]
     points: list[tuple[float, float]] = Field(min_length=1, description="[x_m, y_m] each")
     loop: bool = False
-    lookahead_m: float = Field(0.8, gt=0, le=100)
-    speed_m_s: float = Field(0.5, gt=0, le=100)
-    tolerance_m: float = Field(0.15, gt=0, le=100)
-    max_turn_rate_rad_s: float = Field(1.5, gt=0, le=100)
+    lookahead_m: float = Field(default=0.8, gt=0, le=100)
+    speed_m_s: float = Field(default=0.5, gt=0, le=100)
+    tolerance_m: float = Field(default=0.15, gt=0, le=100)
+    max_turn_rate_rad_s: float = Field(default=1.5, gt=0, le=100)
     face_travel: bool = True
     pose_source: PoseSource = "true_pose"
 
@@ -128,22 +122,26 @@ class MazeSolverConfig(_Config):
 
     type: Literal["maze_solver"]
     method: Literal["astar", "tremaux"] = "astar"
-    goal_cell: tuple[_Cell, _Cell] | None = Field(None, description="[row, col] of the map grid")
+    goal_cell: tuple[_Cell, _Cell] | None = Field(
+        default=None, description="[row, col] of the map grid"
+    )
     goal_x_m: float | None = None
     goal_y_m: float | None = None
-    speed_m_s: float = Field(0.8, gt=0, le=100)
-    goal_tolerance_m: float = Field(0.3, gt=0, le=100)
+    speed_m_s: float = Field(default=0.8, gt=0, le=100)
+    goal_tolerance_m: float = Field(default=0.3, gt=0, le=100)
     # astar
-    lookahead_m: float = Field(0.8, gt=0, le=100)
+    lookahead_m: float = Field(default=0.8, gt=0, le=100)
     connectivity: Literal[4, 8] = 8
-    clearance_m: float = Field(0.05, ge=0, le=10, description="extra margin beyond half width")
-    preferred_clearance_m: float = Field(1.0, gt=0, le=100)
-    plan_resolution_m: float = Field(0.25, gt=0, le=10)
+    clearance_m: float = Field(
+        default=0.05, ge=0, le=10, description="extra margin beyond half width"
+    )
+    preferred_clearance_m: float = Field(default=1.0, gt=0, le=100)
+    plan_resolution_m: float = Field(default=0.25, gt=0, le=10)
     pose_source: PoseSource = "true_pose"
     # tremaux
     sensor: str = "lidar"
     hand: Literal["right", "left"] = "right"
-    wall_distance_m: float = Field(0.8, gt=0, le=100)
+    wall_distance_m: float = Field(default=0.8, gt=0, le=100)
 
     @model_validator(mode="after")
     def _one_goal(self) -> MazeSolverConfig:
@@ -233,12 +231,16 @@ class PursueConfig(_Config):
 
     type: Literal["pursue"]
     target: str = Field(min_length=1, description="the robot to catch (list it in 'knows')")
-    reorient_deg: float = Field(22.5, gt=0, lt=180, description="turn on the spot beyond this")
-    speed_m_s: float = Field(1.0, gt=0, le=50)
-    turn_rate_rad_s: float = Field(1.0, gt=0, le=50)
-    reorient_speed_m_s: float = Field(0.0, ge=0, le=50, description="speed while reorienting")
-    sensor: str = Field("rangers", description="range sensor used to keep off walls")
-    wall_margin_m: float = Field(0.12, ge=0, le=10, description="clearance kept from walls")
+    reorient_deg: float = Field(
+        default=22.5, gt=0, lt=180, description="turn on the spot beyond this"
+    )
+    speed_m_s: float = Field(default=1.0, gt=0, le=50)
+    turn_rate_rad_s: float = Field(default=1.0, gt=0, le=50)
+    reorient_speed_m_s: float = Field(
+        default=0.0, ge=0, le=50, description="speed while reorienting"
+    )
+    sensor: str = Field(default="rangers", description="range sensor used to keep off walls")
+    wall_margin_m: float = Field(default=0.12, ge=0, le=10, description="clearance kept from walls")
 
 
 class EvadeConfig(_Config):
@@ -246,13 +248,15 @@ class EvadeConfig(_Config):
 
     type: Literal["evade"]
     pursuer: str = Field(min_length=1, description="the robot to flee (list it in 'knows')")
-    alert_distance_m: float = Field(4.0, gt=0, le=1000)
-    speed_m_s: float = Field(0.8, gt=0, le=50)
-    turn_rate_rad_s: float = Field(2.5, gt=0, le=50)
-    wander_speed_m_s: float | None = Field(None, ge=0, le=50, description="default speed / 2")
-    sensor: str = Field("rangers", description="range sensor used to keep off walls")
-    space_sensor: str = Field("lidar", description="finds free space, if the robot has it")
-    wall_margin_m: float = Field(0.12, ge=0, le=10, description="clearance kept from walls")
+    alert_distance_m: float = Field(default=4.0, gt=0, le=1000)
+    speed_m_s: float = Field(default=0.8, gt=0, le=50)
+    turn_rate_rad_s: float = Field(default=2.5, gt=0, le=50)
+    wander_speed_m_s: float | None = Field(
+        default=None, ge=0, le=50, description="default speed / 2"
+    )
+    sensor: str = Field(default="rangers", description="range sensor used to keep off walls")
+    space_sensor: str = Field(default="lidar", description="finds free space, if the robot has it")
+    wall_margin_m: float = Field(default=0.12, ge=0, le=10, description="clearance kept from walls")
 
 
 def _check_robot(name: str, field: str, ctx: ControllerContext) -> None:
@@ -311,12 +315,12 @@ class TeleopConfig(_Config):
     """``controller: {type: teleop, deadman_s: 0.5}``"""
 
     type: Literal["teleop"]
-    deadman_s: float = Field(0.5, gt=0, le=3600)
-    linear_speed_m_s: float = Field(0.5, gt=0, le=100)
-    lateral_speed_m_s: float = Field(0.5, gt=0, le=100)
-    turn_rate_rad_s: float = Field(1.0, gt=0, le=100)
+    deadman_s: float = Field(default=0.5, gt=0, le=3600)
+    linear_speed_m_s: float = Field(default=0.5, gt=0, le=100)
+    lateral_speed_m_s: float = Field(default=0.5, gt=0, le=100)
+    turn_rate_rad_s: float = Field(default=1.0, gt=0, le=100)
     clock: Literal["simulation", "wall"] = Field(
-        "simulation", description="time of the dead-man timeout: sim time or time.monotonic"
+        default="simulation", description="time of the dead-man timeout: sim time or time.monotonic"
     )
 
 
@@ -338,12 +342,14 @@ class WallFollowConfig(_Config):
 
     type: Literal["wall_follow"]
     side: Literal["left", "right"] = "left"
-    sensor: str = Field("lidar", description="a lidar, or the thesis's four rangers")
-    distance_m: float = Field(0.6, gt=0, le=10, description="from the wall to the body centre")
-    speed_m_s: float = Field(0.4, gt=0, le=10)
-    turn_rate_rad_s: float = Field(1.0, gt=0, le=20)
+    sensor: str = Field(default="lidar", description="a lidar, or the thesis's four rangers")
+    distance_m: float = Field(
+        default=0.6, gt=0, le=10, description="from the wall to the body centre"
+    )
+    speed_m_s: float = Field(default=0.4, gt=0, le=10)
+    turn_rate_rad_s: float = Field(default=1.0, gt=0, le=20)
     heading_source: Literal["odometry", "true_pose"] = Field(
-        "odometry", description="rangers only: the heading held square to the walls"
+        default="odometry", description="rangers only: the heading held square to the walls"
     )
 
 
@@ -389,12 +395,18 @@ class MarkerSearchConfig(_Config):
         "original", "mip_36h12",
         "apriltag_16h5", "apriltag_25h9", "apriltag_36h10", "apriltag_36h11",
     ] = "4x4_50"  # fmt: skip
-    camera: str = Field("camera", description="the name of the robot's camera")
-    stop_distance_m: float = Field(0.8, gt=0, le=20, description="from the marker to the camera")
-    speed_m_s: float = Field(0.4, gt=0, le=10)
-    turn_rate_rad_s: float = Field(0.8, gt=0, le=10)
-    clearance_m: float = Field(0.25, ge=0, le=5, description="kept from obstacles when exploring")
-    leg_m: float = Field(2.5, gt=0, le=100, description="longest straight leg between scans")
+    camera: str = Field(default="camera", description="the name of the robot's camera")
+    stop_distance_m: float = Field(
+        default=0.8, gt=0, le=20, description="from the marker to the camera"
+    )
+    speed_m_s: float = Field(default=0.4, gt=0, le=10)
+    turn_rate_rad_s: float = Field(default=0.8, gt=0, le=10)
+    clearance_m: float = Field(
+        default=0.25, ge=0, le=5, description="kept from obstacles when exploring"
+    )
+    leg_m: float = Field(
+        default=2.5, gt=0, le=100, description="longest straight leg between scans"
+    )
     pose_source: PoseSource = "odometry"
 
 

@@ -15,7 +15,6 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import (
     BaseModel,
-    ConfigDict,
     Field,
     PrivateAttr,
     ValidationError,
@@ -24,30 +23,15 @@ from pydantic import (
 )
 
 from agvsim.behaviours import BEHAVIOURS
+from agvsim.config_base import StrictConfig
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
 from agvsim.master.config import MasterConfig
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
-from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
+from agvsim.scenario_limits import MAX_MAGNITUDE
 from agvsim.sim.spec import ControlMode
-
-
-class _Strict(BaseModel):
-    # NaN and inf are refused in every float; text is bounded (names are shorter still)
-    model_config = ConfigDict(
-        extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=100_000
-    )
-
-    @field_validator("*")
-    @classmethod
-    def _not_huge(cls, value: Any) -> Any:
-        if (bad := too_large(value)) is not None:
-            item = f"{bad!r} is " if isinstance(value, list | tuple) else ""
-            raise ValueError(f"{item}too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
-        return value
-
 
 # Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
 Seed = Annotated[int, Field(ge=0, le=2**63 - 1, description="0 .. 2^63 - 1")]
@@ -57,16 +41,16 @@ PathText = Annotated[str, Field(min_length=1, max_length=4096)]
 
 
 # ---------------------------------------------------------------------------------- world
-class RandomMaze(_Strict):
-    rows: int = Field(8, ge=1, le=500, description="rooms north-south")
-    cols: int = Field(8, ge=1, le=500, description="rooms west-east")
+class RandomMaze(StrictConfig):
+    rows: int = Field(default=8, ge=1, le=500, description="rooms north-south")
+    cols: int = Field(default=8, ge=1, le=500, description="rooms west-east")
     seed: Seed = 0
-    corridor_cells: int = Field(2, ge=1, le=50)
-    wall_cells: int = Field(1, ge=1, le=50)
-    loop_fraction: float = Field(0.0, ge=0.0, le=1.0)
+    corridor_cells: int = Field(default=2, ge=1, le=50)
+    wall_cells: int = Field(default=1, ge=1, le=50)
+    loop_fraction: float = Field(default=0.0, ge=0.0, le=1.0)
 
 
-class BoxObstacle(_Strict):
+class BoxObstacle(StrictConfig):
     x_m: float
     y_m: float
     theta_deg: float = 0.0
@@ -78,13 +62,13 @@ Byte = Annotated[int, Field(ge=0, le=255)]
 RGBConfig = tuple[Byte, Byte, Byte]
 
 
-class PaintConfig(_Strict):
+class PaintConfig(StrictConfig):
     rows: tuple[Cell, Cell] = Field(description="first and last row (inclusive), row 0 = north")
     cols: tuple[Cell, Cell] = Field(description="first and last column (inclusive)")
     rgb: RGBConfig
 
 
-class ColorsConfig(_Strict):
+class ColorsConfig(StrictConfig):
     """What the onboard camera sees: colours 0..255 and painted wall cells."""
 
     wall_rgb: RGBConfig = (175, 175, 185)
@@ -96,15 +80,19 @@ class ColorsConfig(_Strict):
     paint: list[PaintConfig] = []
 
 
-class _MarkerCommon(_Strict):
+class _MarkerCommon(StrictConfig):
     face: Literal["north", "east", "south", "west"]
-    cell: tuple[Cell, Cell] | None = Field(None, description="[row, col] of the wall cell")
+    cell: tuple[Cell, Cell] | None = Field(default=None, description="[row, col] of the wall cell")
     x_m: float | None = None
     y_m: float | None = None
-    offset_m: float = Field(0.0, description="along the face, to the right seen from the front")
-    size_m: float = Field(0.4, gt=0, le=100, description="side of the code, quiet zone excluded")
+    offset_m: float = Field(
+        default=0.0, description="along the face, to the right seen from the front"
+    )
+    size_m: float = Field(
+        default=0.4, gt=0, le=100, description="side of the code, quiet zone excluded"
+    )
     center_z_m: float | None = Field(
-        None, ge=0, description="height of the centre; default: half the wall"
+        default=None, ge=0, description="height of the centre; default: half the wall"
     )
     name: Name | None = None
 
@@ -149,20 +137,20 @@ MarkerConfig = Annotated[
 ]
 
 
-class WorldConfig(_Strict):
+class WorldConfig(StrictConfig):
     maze: Literal["thesis_fig16", "thesis_c1"] | None = None
     matrix: list[list[int]] | None = None
     picture: str | None = Field(
-        None, max_length=64 * 1024 * 1024, description="text picture: '#' wall, '.' free"
+        default=None, max_length=64 * 1024 * 1024, description="text picture: '#' wall, '.' free"
     )
-    file: PathText | None = Field(None, description=".txt .csv .png .pgm or ROS map .yaml")
+    file: PathText | None = Field(default=None, description=".txt .csv .png .pgm or ROS map .yaml")
     random: RandomMaze | None = None
-    cell_size_m: float = Field(1.0, gt=0, le=100)
+    cell_size_m: float = Field(default=1.0, gt=0, le=100)
     origin_xy_m: tuple[float, float] | None = None
     boxes: list[BoxObstacle] = []
     colors: ColorsConfig = ColorsConfig()
     markers: list[MarkerConfig] = []
-    floor: FloorConfig | None = Field(None, description="friction for robots with dynamics")
+    floor: FloorConfig | None = Field(default=None, description="friction for robots with dynamics")
 
     @model_validator(mode="after")
     def _one_source(self) -> WorldConfig:
@@ -176,24 +164,24 @@ class WorldConfig(_Strict):
 
 
 # ---------------------------------------------------------------------------------- robots
-class Pose(_Strict):
+class Pose(StrictConfig):
     x_m: float = 0.0
     y_m: float = 0.0
     theta_deg: float = 0.0
 
 
-class Body(_Strict):
-    length_m: float = Field(0.6, gt=0, le=20)
-    width_m: float = Field(0.45, gt=0, le=20)
-    offset_x_m: float | None = Field(None, description="footprint centre ahead of P")
+class Body(StrictConfig):
+    length_m: float = Field(default=0.6, gt=0, le=20)
+    width_m: float = Field(default=0.45, gt=0, le=20)
+    offset_x_m: float | None = Field(default=None, description="footprint centre ahead of P")
 
 
-class SensorCommon(_Strict):
+class SensorCommon(StrictConfig):
     name: Name | None = None
-    rate_hz: float | None = Field(None, gt=0, le=10000)
-    range_min_m: float = Field(0.0, ge=0)
-    noise_std_m: float = Field(0.0, ge=0)
-    dropout_prob: float = Field(0.0, ge=0, le=1)
+    rate_hz: float | None = Field(default=None, gt=0, le=10000)
+    range_min_m: float = Field(default=0.0, ge=0)
+    noise_std_m: float = Field(default=0.0, ge=0)
+    dropout_prob: float = Field(default=0.0, ge=0, le=1)
     mount_x_m: float | None = None
     mount_y_m: float = 0.0
     mount_yaw_deg: float = 0.0
@@ -201,50 +189,50 @@ class SensorCommon(_Strict):
 
 class RangersConfig(SensorCommon):
     type: Literal["rangers"]
-    range_max_m: float = Field(1.0, gt=0, le=1000)
+    range_max_m: float = Field(default=1.0, gt=0, le=1000)
 
 
 class LidarConfig(SensorCommon):
     type: Literal["lidar"]
-    beams: int = Field(240, ge=1, le=100000)
-    fov_deg: float = Field(360.0, gt=0, le=360)
+    beams: int = Field(default=240, ge=1, le=100000)
+    fov_deg: float = Field(default=360.0, gt=0, le=360)
     angle_min_deg: float | None = None
-    range_max_m: float = Field(10.0, gt=0, le=1000)
+    range_max_m: float = Field(default=10.0, gt=0, le=1000)
 
 
-class CameraConfig(_Strict):
+class CameraConfig(StrictConfig):
     """The onboard camera: RGB and depth images (agvsim.sensors.camera)."""
 
     type: Literal["camera"]
     name: Name | None = None
-    width_px: int = Field(320, ge=8, le=4096)
-    height_px: int = Field(240, ge=8, le=4096)
-    hfov_deg: float = Field(60.0, gt=0, lt=170)
-    rate_hz: float = Field(10.0, gt=0, le=1000)
-    range_max_m: float = Field(30.0, gt=0, le=1000)
-    mount_x_m: float | None = Field(None, description="default: the front of the body")
+    width_px: int = Field(default=320, ge=8, le=4096)
+    height_px: int = Field(default=240, ge=8, le=4096)
+    hfov_deg: float = Field(default=60.0, gt=0, lt=170)
+    rate_hz: float = Field(default=10.0, gt=0, le=1000)
+    range_max_m: float = Field(default=30.0, gt=0, le=1000)
+    mount_x_m: float | None = Field(default=None, description="default: the front of the body")
     mount_y_m: float = 0.0
-    mount_z_m: float | None = Field(None, gt=0, description="default: 5 cm above the body")
+    mount_z_m: float | None = Field(default=None, gt=0, description="default: 5 cm above the body")
     mount_yaw_deg: float = 0.0
-    pitch_deg: float = Field(0.0, ge=-80, le=80, description="positive: looking down")
+    pitch_deg: float = Field(default=0.0, ge=-80, le=80, description="positive: looking down")
     noise_std: float = Field(
-        0.0, ge=0, le=255, description="Gaussian pixel noise, std in 0..255 levels; 0 = off"
+        default=0.0, ge=0, le=255, description="Gaussian pixel noise, std in 0..255 levels; 0 = off"
     )
 
 
 SensorConfig = Annotated[RangersConfig | LidarConfig | CameraConfig, Field(discriminator="type")]
 
 
-class OdometryConfig(_Strict):
-    wheel_noise_rel: float = Field(0.01, ge=0, le=1)
-    wheel_noise_abs_rad_s: float = Field(0.0, ge=0)
-    steering_noise_deg: float = Field(0.0, ge=0)
+class OdometryConfig(StrictConfig):
+    wheel_noise_rel: float = Field(default=0.01, ge=0, le=1)
+    wheel_noise_abs_rad_s: float = Field(default=0.0, ge=0)
+    steering_noise_deg: float = Field(default=0.0, ge=0)
 
 
-class ScriptStepConfig(_Strict):
+class ScriptStepConfig(StrictConfig):
     duration_s: float = Field(gt=0)
-    twist: list[float] | None = Field(None, description="[vx, omega] or [vx, vy, omega]")
-    wheels: list[float] | None = Field(None, description="driven wheel speeds, rad/s")
+    twist: list[float] | None = Field(default=None, description="[vx, omega] or [vx, vy, omega]")
+    wheels: list[float] | None = Field(default=None, description="driven wheel speeds, rad/s")
     steering_deg: float = 0.0
 
     @model_validator(mode="after")
@@ -256,33 +244,36 @@ class ScriptStepConfig(_Strict):
         return self
 
 
-class ScriptConfig(_Strict):
+class ScriptConfig(StrictConfig):
     type: Literal["script"]
     steps: list[ScriptStepConfig] = Field(min_length=1)
     loop: bool = False
 
 
-class AvoidConfig(_Strict):
+class AvoidConfig(StrictConfig):
     type: Literal["avoid"]
     sensor: str = "rangers"
-    trigger_m: float = Field(0.8, gt=0)
-    speed_m_s: float = Field(0.5, gt=0)
-    turn_rate_rad_s: float = Field(1.0, gt=0)
+    trigger_m: float = Field(default=0.8, gt=0)
+    speed_m_s: float = Field(default=0.5, gt=0)
+    turn_rate_rad_s: float = Field(default=1.0, gt=0)
     heading_source: Literal["true_pose", "odometry"] = "true_pose"
     side_clearance_m: float | None = Field(
-        None, gt=0, description="kept off side walls while driving; default 0.8 x trigger_m"
+        default=None, gt=0, description="kept off side walls while driving; default 0.8 x trigger_m"
     )
 
 
-class PythonControllerConfig(_Strict):
+class PythonControllerConfig(StrictConfig):
     type: Literal["python"]
     file: PathText = Field(description="a .py file next to the scenario (or an absolute path)")
     name: str = Field(
-        "controller", min_length=1, max_length=200, description="function or class in the file"
+        default="controller",
+        min_length=1,
+        max_length=200,
+        description="function or class in the file",
     )
 
 
-class IdleConfig(_Strict):
+class IdleConfig(StrictConfig):
     type: Literal["idle"]
 
 
@@ -294,46 +285,57 @@ ControllerConfig = Annotated[
 ]
 
 
-class MetricsConfig(_Strict):
+class MetricsConfig(StrictConfig):
     capture: CaptureConfig | None = None
     reach: ReachConfig | None = None
     coverage: CoverageConfig | None = None
 
 
-class SlamBlock(_Strict):
+class SlamBlock(StrictConfig):
     """Online graph SLAM on one of the robot's lidars and its wheel odometry (agvsim.slam)."""
 
-    sensor: Name = Field("lidar", description="the lidar (range fan) whose scans SLAM reads")
-    resolution_m: float = Field(0.05, gt=0.005, le=1.0, description="map cell size (20 cells/m)")
+    sensor: Name = Field(
+        default="lidar", description="the lidar (range fan) whose scans SLAM reads"
+    )
+    resolution_m: float = Field(
+        default=0.05, gt=0.005, le=1.0, description="map cell size (20 cells/m)"
+    )
     max_range_m: float | None = Field(
-        None, gt=0, description="readings used up to this range; default: the sensor's maximum"
+        default=None,
+        gt=0,
+        description="readings used up to this range; default: the sensor's maximum",
     )
     loop_min_score: float = Field(
-        0.55, gt=0, lt=1, description="loop-closure acceptance threshold (mean match likelihood)"
+        default=0.55,
+        gt=0,
+        lt=1,
+        description="loop-closure acceptance threshold (mean match likelihood)",
     )
-    loop_search_radius_m: float = Field(3.0, gt=0, le=1000, description="loop-closure radius")
+    loop_search_radius_m: float = Field(
+        default=3.0, gt=0, le=1000, description="loop-closure radius"
+    )
     map_period_s: float = Field(
-        1.0, gt=0, description="how often the live map is redrawn (browser app overlay)"
+        default=1.0, gt=0, description="how often the live map is redrawn (browser app overlay)"
     )
 
 
-class RobotConfig(_Strict):
+class RobotConfig(StrictConfig):
     name: Name
     model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
     mode: ControlMode = ControlMode.INVERSE
-    params: dict[Name, Any] = Field({}, description="model parameters, see `agvsim models`")
+    params: dict[Name, Any] = Field(default={}, description="model parameters, see `agvsim models`")
     body: Body = Body()
     pose: Pose = Pose()
-    color: str = Field("#d62728", max_length=64)
+    color: str = Field(default="#d62728", max_length=64)
     sensors: list[SensorConfig] = []
     odometry: OdometryConfig = OdometryConfig()
     controller: ControllerConfig = IdleConfig(type="idle")
     knows: list[Name] = Field(
-        [], description="robots whose true pose this robot's controller sees (obs.others)"
+        default=[], description="robots whose true pose this robot's controller sees (obs.others)"
     )
     slam: SlamBlock | None = None
     dynamics: DynamicsConfig | None = Field(
-        None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
+        default=None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
     )
 
     @field_validator("params")
@@ -366,37 +368,44 @@ class RobotConfig(_Strict):
         return value
 
 
-class LimitsConfig(_Strict):
+class LimitsConfig(StrictConfig):
     """The scenario raising (or lowering) its own run limits; see agvsim.scenario_limits."""
 
-    max_steps: int | None = Field(None, ge=1, le=10**15, description="duration_s / dt_s")
-    max_robots: int | None = Field(None, ge=1, le=10**9, description="robots in the scenario")
-    max_grid_cells: int | None = Field(None, ge=1, le=10**12, description="map rows x cols")
+    max_steps: int | None = Field(default=None, ge=1, le=10**15, description="duration_s / dt_s")
+    max_robots: int | None = Field(
+        default=None, ge=1, le=10**9, description="robots in the scenario"
+    )
+    max_grid_cells: int | None = Field(default=None, ge=1, le=10**12, description="map rows x cols")
     max_camera_pixels_per_s: float | None = Field(
-        None, gt=0, description="width x height x rate, all cameras"
+        default=None, gt=0, description="width x height x rate, all cameras"
     )
     max_lidar_rays_per_s: float | None = Field(
-        None, gt=0, description="beams x rate, all range sensors"
+        default=None, gt=0, description="beams x rate, all range sensors"
     )
 
 
-class Scenario(_Strict):
-    name: str = Field("unnamed scenario", max_length=200)
-    description: str = Field("", max_length=20_000)
+class Scenario(StrictConfig):
+    name: str = Field(default="unnamed scenario", max_length=200)
+    description: str = Field(default="", max_length=20_000)
     seed: Seed = 0
-    duration_s: float = Field(60.0, gt=0, le=1e7)
-    dt_s: float = Field(0.02, gt=0, le=1.0)
+    duration_s: float = Field(default=60.0, gt=0, le=1e7)
+    dt_s: float = Field(default=0.02, gt=0, le=1.0)
     world: WorldConfig
     robots: list[RobotConfig] = Field(min_length=1)
     metrics: MetricsConfig = MetricsConfig()
     on_controller_error: Literal["stop_run", "stop_robot"] = Field(
-        "stop_run", description="a failing controller ends the run, or only stops its robot"
+        default="stop_run", description="a failing controller ends the run, or only stops its robot"
     )
-    limits: LimitsConfig | None = Field(None, description="raise the run's resource limits")
-    layout: LayoutConfig | None = Field(None, description="a track layout (LIF), docs/fleet.md")
-    vda5050: Vda5050Config | None = Field(None, description="VDA 5050 vehicles, docs/fleet.md")
+    limits: LimitsConfig | None = Field(default=None, description="raise the run's resource limits")
+    layout: LayoutConfig | None = Field(
+        default=None, description="a track layout (LIF), docs/fleet.md"
+    )
+    vda5050: Vda5050Config | None = Field(
+        default=None, description="VDA 5050 vehicles, docs/fleet.md"
+    )
     master: MasterConfig | None = Field(
-        None, description="transport orders, charging, breakdowns for the master, docs/master.md"
+        default=None,
+        description="transport orders, charging, breakdowns for the master, docs/master.md",
     )
     _base_dir: Path = PrivateAttr(default=Path("."))
     _source: str = PrivateAttr(default="scenario")

@@ -1,0 +1,35 @@
+"""The one base class of every validated configuration block (scenario, behaviours, dynamics,
+fleet, master).
+
+``StrictConfig`` refuses what no block may hold: unknown keys (the loader turns them into
+"did you mean ...?"), NaN and inf, any float of magnitude above ``MAX_MAGNITUDE`` (1e12: its
+square stays finite and float32 holds it) and unbounded text. A block validated once at the
+edge is frozen: the core receives plain typed values, never a dict to check again.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, field_validator
+
+from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
+
+TEXT_MAX_CHARS = 4096  # any text field (a path at most); longer text says so in its Field
+
+
+class StrictConfig(BaseModel):
+    """A frozen configuration block: unknown keys, NaN / inf, huge numbers and long text are
+    refused with a message naming the value and what is allowed."""
+
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=TEXT_MAX_CHARS
+    )
+
+    @field_validator("*")
+    @classmethod
+    def _not_huge(cls, value: Any) -> Any:
+        if (bad := too_large(value)) is not None:
+            item = f"{bad!r} is " if isinstance(value, list | tuple) else ""
+            raise ValueError(f"{item}too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
+        return value
