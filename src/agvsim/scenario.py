@@ -10,7 +10,6 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import math
-from dataclasses import fields as dc_fields
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -25,7 +24,7 @@ from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.control.traffic import KeepClear, RobotSight, StaticMap, sight_sensor
 from agvsim.dynamics.vehicle import check_dynamics
-from agvsim.kinematics import MODELS, stack_models, wrap_angle
+from agvsim.kinematics import stack_models, wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
 from agvsim.scenario_dynamics import dynamics_spec, floor_spec
 from agvsim.scenario_limits import (
@@ -35,6 +34,7 @@ from agvsim.scenario_limits import (
     check_robot_count,
     check_scenario,
 )
+from agvsim.scenario_params import build_model
 from agvsim.scenario_schema import (
     AvoidConfig,
     CameraConfig,
@@ -50,6 +50,7 @@ from agvsim.scenario_schema import (
     _loc,
 )
 from agvsim.scenario_schema import _models_in as _models_in  # re-exported
+from agvsim.scenario_schema import parse_robot as parse_robot  # re-exported
 from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
@@ -240,36 +241,6 @@ def build_grid(cfg: WorldConfig, base_dir: Path, limits: Limits | None = None) -
     return grid
 
 
-def _model(rc: RobotConfig, where: str) -> Any:
-    cls = MODELS[rc.model]
-    allowed = [f.name for f in dc_fields(cls)]
-    kwargs: dict[str, Any] = {}
-    for k, v in rc.params.items():
-        if k not in allowed:
-            raise ScenarioError(
-                "",
-                [
-                    f"{where}.params: unknown parameter {k!r} for model "
-                    f"{rc.model!r}" + _did_you_mean(k, allowed)
-                ],
-            )
-        default = next(f.default for f in dc_fields(cls) if f.name == k)
-        numeric = isinstance(default, int | float | np.floating)
-        if numeric and (isinstance(v, str | bool) or not isinstance(v, int | float)):
-            raise ScenarioError("", [f"{where}.params.{k}: must be a number, got {v!r}"])
-        if numeric and not (abs(v) <= 1e12 and math.isfinite(v)):  # abs first: a huge int
-            raise ScenarioError(
-                "", [f"{where}.params.{k}: {v!r} is not allowed (a finite number, |x| <= 1e12)"]
-            )
-        if not numeric and not isinstance(v, str):
-            raise ScenarioError("", [f"{where}.params.{k}: must be text, got {v!r}"])
-        kwargs[k] = v
-    try:
-        return cls(**kwargs)
-    except (ValueError, TypeError) as err:
-        raise ScenarioError("", [f"{where}.params: {err}"]) from None
-
-
 def _sensor(
     sc: RangersConfig | LidarConfig, mount_x: float, rate_default: float
 ) -> RangeSensorSpec:
@@ -296,6 +267,12 @@ def _sensor(
 def default_camera_height(wheel_radius_m: float) -> float:
     """Where a camera without ``mount_z_m`` sits: 5 cm above the robot's body (m)."""
     return float(wheel_radius_m) + BODY_HEIGHT_M + 0.05
+
+
+def default_rate_hz(sensor_type: str, dt_s: float) -> float:
+    """The rate of a range sensor without ``rate_hz``: the thesis's rangers every step, a
+    lidar 10 Hz."""
+    return 10.0 if sensor_type == "lidar" else 1.0 / dt_s
 
 
 def _camera(sc: CameraConfig, rc: RobotConfig, model: Any, offset: float) -> CameraSpec:
@@ -375,7 +352,7 @@ def robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
 
 
 def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
-    model = _model(rc, where)
+    model = build_model(rc.model, rc.params)
     # car-like bodies sit ahead of the rear axle; others are centred on P
     offset = rc.body.offset_x_m
     if offset is None:
@@ -386,7 +363,7 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
             if isinstance(sc, CameraConfig):
                 cameras.append(_camera(sc, rc, model, offset))
             else:
-                sensors.append(_sensor(sc, offset, 10.0 if sc.type == "lidar" else 1.0 / dt_s))
+                sensors.append(_sensor(sc, offset, default_rate_hz(sc.type, dt_s)))
         except ValueError as err:
             raise ScenarioError("", [f"{where}.sensors[{k}]: {err}"]) from None
     names = [s.name for s in sensors] + [c.name for c in cameras]
@@ -531,7 +508,7 @@ def _bindings(
                         f"{c.sensor!r}" + _did_you_mean(c.sensor, names)
                     ],
                 )
-            key = (c, rc.model, rc.mode, rc.params.get("steering_geometry"))
+            key = (c, rc.model, rc.mode, getattr(rc.params, "steering_geometry", None))
             avoid_groups.setdefault(key, []).append(i)
         elif isinstance(c, PythonControllerConfig):
             out.append(Binding(_load_python(c, base_dir, where), (i,), user_code=True))

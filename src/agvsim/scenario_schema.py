@@ -7,17 +7,20 @@ Loading and building live in ``agvsim.scenario``, which re-exports the names imp
 from __future__ import annotations
 
 import difflib
-import math
 import re
 from collections import Counter
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias, Union
 
 from pydantic import (
     BaseModel,
+    Discriminator,
     Field,
     PrivateAttr,
+    Tag,
+    TypeAdapter,
     ValidationError,
+    create_model,
     field_validator,
     model_validator,
 )
@@ -25,12 +28,13 @@ from pydantic import (
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.config_base import StrictConfig
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
+from agvsim.kinematics import MODELS
 from agvsim.master.config import MasterConfig
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
-from agvsim.scenario_limits import MAX_MAGNITUDE
+from agvsim.scenario_params import PARAMS
 from agvsim.sim.spec import ControlMode
 
 # Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
@@ -167,7 +171,7 @@ class WorldConfig(StrictConfig):
 class Pose(StrictConfig):
     x_m: float = 0.0
     y_m: float = 0.0
-    theta_deg: float = 0.0
+    theta_deg: float = Field(default=0.0, title="heading")
 
 
 class Body(StrictConfig):
@@ -178,7 +182,9 @@ class Body(StrictConfig):
 
 class SensorCommon(StrictConfig):
     name: Name | None = None
-    rate_hz: float | None = Field(default=None, gt=0, le=10000)
+    rate_hz: float | None = Field(
+        default=None, gt=0, le=10000, description="default: every step (rangers), 10 Hz (lidar)"
+    )
     range_min_m: float = Field(default=0.0, ge=0)
     noise_std_m: float = Field(default=0.0, ge=0)
     dropout_prob: float = Field(default=0.0, ge=0, le=1)
@@ -189,15 +195,15 @@ class SensorCommon(StrictConfig):
 
 class RangersConfig(SensorCommon):
     type: Literal["rangers"]
-    range_max_m: float = Field(default=1.0, gt=0, le=1000)
+    range_max_m: float = Field(default=1.0, gt=0, le=1000, title="range")
 
 
 class LidarConfig(SensorCommon):
     type: Literal["lidar"]
     beams: int = Field(default=240, ge=1, le=100000)
-    fov_deg: float = Field(default=360.0, gt=0, le=360)
+    fov_deg: float = Field(default=360.0, gt=0, le=360, title="field of view")
     angle_min_deg: float | None = None
-    range_max_m: float = Field(default=10.0, gt=0, le=1000)
+    range_max_m: float = Field(default=10.0, gt=0, le=1000, title="range")
 
 
 class CameraConfig(StrictConfig):
@@ -207,16 +213,24 @@ class CameraConfig(StrictConfig):
     name: Name | None = None
     width_px: int = Field(default=320, ge=8, le=4096)
     height_px: int = Field(default=240, ge=8, le=4096)
-    hfov_deg: float = Field(default=60.0, gt=0, lt=170)
+    hfov_deg: float = Field(default=60.0, gt=0, lt=170, title="field of view")
     rate_hz: float = Field(default=10.0, gt=0, le=1000)
-    range_max_m: float = Field(default=30.0, gt=0, le=1000)
+    range_max_m: float = Field(default=30.0, gt=0, le=1000, title="range")
     mount_x_m: float | None = Field(default=None, description="default: the front of the body")
     mount_y_m: float = 0.0
-    mount_z_m: float | None = Field(default=None, gt=0, description="default: 5 cm above the body")
+    mount_z_m: float | None = Field(
+        default=None, gt=0, title="mount height", description="default: 5 cm above the body"
+    )
     mount_yaw_deg: float = 0.0
-    pitch_deg: float = Field(default=0.0, ge=-80, le=80, description="positive: looking down")
+    pitch_deg: float = Field(
+        default=0.0, ge=-80, le=80, title="pitch down", description="positive: looking down"
+    )
     noise_std: float = Field(
-        default=0.0, ge=0, le=255, description="Gaussian pixel noise, std in 0..255 levels; 0 = off"
+        default=0.0,
+        ge=0,
+        le=255,
+        title="noise std (0..255)",
+        description="Gaussian pixel noise, std in 0..255 levels; 0 = off",
     )
 
 
@@ -319,11 +333,14 @@ class SlamBlock(StrictConfig):
     )
 
 
-class RobotConfig(StrictConfig):
+class _RobotBase(StrictConfig):
+    """The keys of every robot entry. ``model`` and its typed ``params`` come with the model's
+    own class (``ROBOT_CONFIGS``), generated from the kinematic dataclass."""
+
     name: Name
-    model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
+    model: str
     mode: ControlMode = ControlMode.INVERSE
-    params: dict[Name, Any] = Field(default={}, description="model parameters, see `agvsim models`")
+    params: Any = Field(default=None, description="model parameters, see `agvsim models`")
     body: Body = Body()
     pose: Pose = Pose()
     color: str = Field(default="#d62728", max_length=64)
@@ -338,21 +355,6 @@ class RobotConfig(StrictConfig):
         default=None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
     )
 
-    @field_validator("params")
-    @classmethod
-    def _numbers_or_text(cls, params: dict[str, Any]) -> dict[str, Any]:
-        for key, value in params.items():
-            number = isinstance(value, int | float) and not isinstance(value, bool)
-            if isinstance(value, float) and not math.isfinite(value):
-                raise ValueError(f"{key}: must be a finite number (NaN and inf are not allowed)")
-            if number and abs(value) > MAX_MAGNITUDE:  # an int of 400 digits: no float holds it
-                raise ValueError(f"{key}: too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
-            if not (number or (isinstance(value, str) and len(value) <= 200)):
-                raise ValueError(
-                    f"{key}: must be a number or a short text, got {short_repr(value)}"
-                )
-        return params
-
     @field_validator("color")
     @classmethod
     def _a_colour(cls, value: str) -> str:
@@ -366,6 +368,52 @@ class RobotConfig(StrictConfig):
                 "name such as 'red' or 'tab:blue')"
             )
         return value
+
+
+# One robot config class a kinematic model (kinematics.MODELS), its params typed from the
+# model's dataclass (agvsim.scenario_params)
+ROBOT_CONFIGS: dict[str, type[_RobotBase]] = {
+    kind: create_model(  # type: ignore[call-overload]
+        f"{MODELS[kind].__name__}Robot",
+        __base__=_RobotBase,
+        model=(Literal[kind], ...),
+        params=(params, Field(default=params(), description=f"{kind} parameters")),
+    )
+    for kind, params in PARAMS.items()
+}
+
+# A robot whose model is missing or unknown: its fields are still checked, so that one
+# refusal lists every fault ("model: required", "unknown key 'modle'", ...)
+_UnknownModelRobot = create_model(
+    "UnknownModelRobot",
+    __base__=_RobotBase,
+    model=(Literal[tuple(MODELS)], ...),
+    params=(dict[Name, Any], {}),
+)
+UNKNOWN_MODEL = "?"  # its tag
+
+
+def _model_tag(entry: Any) -> str:
+    model = entry.get("model") if isinstance(entry, dict) else getattr(entry, "model", None)
+    return model if isinstance(model, str) and model in MODELS else UNKNOWN_MODEL
+
+
+if TYPE_CHECKING:
+    RobotConfig: TypeAlias = _RobotBase
+else:  # a union discriminated by ``model``
+    RobotConfig = Annotated[
+        Union[  # noqa: UP007
+            tuple(Annotated[cls, Tag(kind)] for kind, cls in ROBOT_CONFIGS.items())
+            + (Annotated[_UnknownModelRobot, Tag(UNKNOWN_MODEL)],)
+        ],
+        Discriminator(_model_tag),
+    ]
+_ROBOT = TypeAdapter(RobotConfig)
+
+
+def parse_robot(entry: dict[str, Any]) -> RobotConfig:
+    """One robot entry of a scenario, validated (pydantic's ValidationError when invalid)."""
+    return _ROBOT.validate_python(entry)
 
 
 class LimitsConfig(StrictConfig):
@@ -468,7 +516,8 @@ def _models_in(ann: Any) -> list[type[BaseModel]]:
 
 
 def _tag_of(model: type[BaseModel]) -> str | None:
-    f = model.model_fields.get("type") or model.model_fields.get("kind")
+    fields = model.model_fields
+    f = fields.get("type") or fields.get("kind") or fields.get("model")
     args = getattr(f.annotation, "__args__", ()) if f is not None else ()
     return str(args[0]) if args else None
 
@@ -513,13 +562,27 @@ def short_repr(value: Any, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 12] + f"... ({len(text):,} chars)"
 
 
+def _untagged(loc: tuple) -> tuple:
+    """``loc`` without the model tag pydantic puts after a robot's index: the file has no
+    such level (``robots[0].params.x``, not ``robots[0].differential.params.x``)."""
+    if len(loc) > 2 and loc[0] == "robots" and (loc[2] in MODELS or loc[2] == UNKNOWN_MODEL):
+        return loc[:2] + loc[3:]
+    return loc
+
+
 def _format_errors(err: ValidationError) -> list[str]:
     out = []
     errors = err.errors()
     for e in errors[:MAX_PROBLEMS]:
         loc = tuple(e["loc"])
-        where = _loc(loc)
-        if e["type"] == "extra_forbidden":
+        where = _loc(_untagged(loc))
+        if e["type"] == "extra_forbidden" and loc[-2:-1] == ("params",) and loc[0] == "robots":
+            key, kind = str(loc[-1]), str(loc[2])
+            out.append(
+                f"{_loc(_untagged(loc[:-1]))}: unknown parameter {short_repr(key)} for model "
+                f"{kind!r}" + _did_you_mean(key, list(PARAMS[kind].model_fields))
+            )
+        elif e["type"] == "extra_forbidden":
             key = str(loc[-1])
             out.append(
                 f"{where}: unknown key {short_repr(key)}"
