@@ -2,8 +2,11 @@
 
 A config class validates the scenario file's ``controller:`` section (unknown keys and bad
 values are refused there, at the edge); its builder turns it into a plain core controller from
-:mod:`agvsim.control`, which never sees pydantic. ``BEHAVIOURS`` is the registry the scenario
-loader uses: config class -> ``build(config, ctx)``.
+:mod:`agvsim.control`, which never sees pydantic, handing the config's fields to it by name
+(``config_base.construct``). ``BEHAVIOURS`` is the one registry of controller types: type tag
+-> :class:`~agvsim.scenario_controllers.Behaviour` (config class, builder, flags). It holds
+the scenario's basic types (script, avoid, python, idle: ``agvsim.scenario_controllers``) and
+these:
 
 =============  ====================  ======================================================
 type           config                controller
@@ -24,12 +27,11 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
-from agvsim.config_base import StrictConfig
+from agvsim.config_base import construct
 from agvsim.control.api import ControllerContext
 from agvsim.control.explorer import TremauxExplorer
 from agvsim.control.goal import GoToGoal
@@ -40,12 +42,13 @@ from agvsim.control.pure_pursuit import PurePursuit
 from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
 from agvsim.control.wall_follow import WallFollower
+from agvsim.scenario_controllers import BASIC, Behaviour, ControllerConfigBase
 from agvsim.world.loaders import MAX_CELLS
 
 _Cell = Annotated[int, Field(ge=0, le=10_000_000)]  # numba takes 64-bit integers only
 
 
-class _Config(StrictConfig):
+class _Config(ControllerConfigBase):
     """Every behaviour config: a strict block whose texts (names of sensors, robots) are short."""
 
     model_config = ConfigDict(str_max_length=200)
@@ -90,30 +93,19 @@ class WaypointsConfig(_Config):
 def build_goal(cfg: GoalConfig, ctx: ControllerContext) -> GoToGoal:
     """The controller a ``goto_goal`` config describes."""
     heading = None if cfg.goal_heading_deg is None else math.radians(cfg.goal_heading_deg)
-    return GoToGoal(
-        (cfg.goal_x_m, cfg.goal_y_m),
-        tolerance_m=cfg.tolerance_m,
-        max_speed_m_s=cfg.max_speed_m_s,
-        max_turn_rate_rad_s=cfg.max_turn_rate_rad_s,
+    return construct(
+        GoToGoal,
+        cfg,
+        goal_xy=(cfg.goal_x_m, cfg.goal_y_m),
         heading_gains=(cfg.heading_kp, cfg.heading_ki, cfg.heading_kd),
         speed_gains=(cfg.speed_kp, cfg.speed_ki, cfg.speed_kd),
         goal_heading_rad=heading,
-        pose_source=cfg.pose_source,
     )
 
 
 def build_waypoints(cfg: WaypointsConfig, ctx: ControllerContext) -> PurePursuit:
     """The controller a ``waypoints`` config describes."""
-    return PurePursuit(
-        cfg.points,
-        lookahead_m=cfg.lookahead_m,
-        speed_m_s=cfg.speed_m_s,
-        loop=cfg.loop,
-        tolerance_m=cfg.tolerance_m,
-        max_turn_rate_rad_s=cfg.max_turn_rate_rad_s,
-        face_travel=cfg.face_travel,
-        pose_source=cfg.pose_source,
-    )
+    return construct(PurePursuit, cfg, waypoints=cfg.points)
 
 
 # ---------------------------------------------------------------------------------- maze
@@ -176,7 +168,8 @@ def build_maze_solver(
     cfg: MazeSolverConfig, ctx: ControllerContext
 ) -> AStarMazeSolver | TremauxExplorer:
     """The controller a ``maze_solver`` config describes, for robot ``ctx.robot_index``."""
-    spec, grid = ctx.spec, ctx.grid
+    spec: Any = ctx.spec
+    grid: Any = ctx.grid
     length = float(getattr(spec, "body_length_m", 0.6))
     width = float(getattr(spec, "body_width_m", 0.45))
     offset = float(getattr(spec, "body_offset_x_m", 0.0))
@@ -184,20 +177,13 @@ def build_maze_solver(
     _check_goal_on_map(cfg, grid)
     if cfg.method == "tremaux":
         if goal_xy is None:
-            x, y = grid.cell_center(*cfg.goal_cell)  # type: ignore[misc,union-attr]
+            assert cfg.goal_cell is not None  # the config holds one goal or the other
+            x, y = grid.cell_center(*cfg.goal_cell)
             goal_xy = (float(x), float(y))
         names = [s.name for s in getattr(spec, "sensors", ())]
         if cfg.sensor not in names:
             raise ValueError(f"maze_solver (tremaux) needs the sensor {cfg.sensor!r}; has {names}")
-        return TremauxExplorer(
-            goal_xy,  # type: ignore[arg-type]
-            sensor=cfg.sensor,
-            hand=cfg.hand,
-            wall_distance_m=cfg.wall_distance_m,
-            speed_m_s=cfg.speed_m_s,
-            goal_tolerance_m=cfg.goal_tolerance_m,
-            body_width_m=width,
-        )
+        return construct(TremauxExplorer, cfg, goal_xy_m=goal_xy, body_width_m=width)
     # A* plans on a raster of <= 5 cm cells (agvsim.control.planning.ClearanceMap): bound it
     up = max(1, math.ceil(grid.resolution_m / 0.05 - 1e-9))
     cells = grid.rows * up * grid.cols * up
@@ -207,21 +193,14 @@ def build_maze_solver(
             f"{cells:,} cells of 5 cm, over the limit {MAX_CELLS:,}; use a smaller map "
             "(world.cell_size_m, fewer cells) or method: tremaux"
         )
-    return AStarMazeSolver(
-        grid,
-        goal_cell=cfg.goal_cell,
+    return construct(
+        AStarMazeSolver,
+        cfg,
+        grid=grid,
         goal_xy_m=goal_xy,
         body_length_m=length,
         body_width_m=width,
         body_offset_x_m=offset,
-        speed_m_s=cfg.speed_m_s,
-        lookahead_m=cfg.lookahead_m,
-        connectivity=cfg.connectivity,
-        clearance_m=cfg.clearance_m,
-        preferred_clearance_m=cfg.preferred_clearance_m,
-        plan_resolution_m=cfg.plan_resolution_m,
-        goal_tolerance_m=cfg.goal_tolerance_m,
-        pose_source=cfg.pose_source,
     )
 
 
@@ -263,13 +242,13 @@ def _check_robot(name: str, field: str, ctx: ControllerContext) -> None:
     me = ctx.robot_names[ctx.robot_index] if ctx.robot_names else None
     if ctx.robot_names and (name not in ctx.robot_names or name == me):
         others = [n for n in ctx.robot_names if n != me]
-        raise ValueError(f"controller.{field}: {name!r} is not another robot (robots: {others})")
+        raise ValueError(f"{field}: {name!r} is not another robot (robots: {others})")
 
 
 def _check_sensor(name: str, field: str, ctx: ControllerContext) -> None:
     names = [s.name for s in getattr(ctx.spec, "sensors", ())]
     if name not in names:
-        raise ValueError(f"controller.{field}: the robot has no sensor {name!r} (it has {names})")
+        raise ValueError(f"{field}: the robot has no sensor {name!r} (it has {names})")
 
 
 def _body_and_mounts(ctx: ControllerContext, margin_m: float) -> dict:
@@ -284,13 +263,10 @@ def _body_and_mounts(ctx: ControllerContext, margin_m: float) -> dict:
 def build_pursue(cfg: PursueConfig, ctx: ControllerContext) -> Pursuer:
     _check_robot(cfg.target, "target", ctx)
     _check_sensor(cfg.sensor, "sensor", ctx)
-    return Pursuer(
-        cfg.target,
+    return construct(
+        Pursuer,
+        cfg,
         reorient_rad=math.radians(cfg.reorient_deg),
-        speed_m_s=cfg.speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        reorient_speed_m_s=cfg.reorient_speed_m_s,
-        sensor=cfg.sensor,
         **_body_and_mounts(ctx, cfg.wall_margin_m),
     )
 
@@ -298,16 +274,7 @@ def build_pursue(cfg: PursueConfig, ctx: ControllerContext) -> Pursuer:
 def build_evade(cfg: EvadeConfig, ctx: ControllerContext) -> Evader:
     _check_robot(cfg.pursuer, "pursuer", ctx)
     _check_sensor(cfg.sensor, "sensor", ctx)
-    return Evader(
-        cfg.pursuer,
-        alert_distance_m=cfg.alert_distance_m,
-        speed_m_s=cfg.speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        wander_speed_m_s=cfg.wander_speed_m_s,
-        sensor=cfg.sensor,
-        space_sensor=cfg.space_sensor,
-        **_body_and_mounts(ctx, cfg.wall_margin_m),
-    )
+    return construct(Evader, cfg, **_body_and_mounts(ctx, cfg.wall_margin_m))
 
 
 # ---------------------------------------------------------------------------------- teleop
@@ -326,17 +293,10 @@ class TeleopConfig(_Config):
 
 def build_teleop(cfg: TeleopConfig, ctx: ControllerContext) -> Teleop:
     """A ``Teleop`` from its config (the app keeps the object to send commands to it)."""
-    return Teleop(
-        deadman_s=cfg.deadman_s,
-        linear_speed_m_s=cfg.linear_speed_m_s,
-        lateral_speed_m_s=cfg.lateral_speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        clock=time.monotonic if cfg.clock == "wall" else None,
-    )
+    return construct(Teleop, cfg, clock=time.monotonic if cfg.clock == "wall" else None)
 
 
-# ---------------------------------------------------------------------------------- registry
-# Behaviours that bring their own config and builder: config class -> build(config, ctx)
+# ---------------------------------------------------------------------------------- walls
 class WallFollowConfig(_Config):
     """``controller: {type: wall_follow, side: left, ...}`` in a scenario."""
 
@@ -356,30 +316,26 @@ class WallFollowConfig(_Config):
 def build_wall_follow(cfg: WallFollowConfig, ctx: ControllerContext) -> WallFollower:
     """The controller for one robot of a scenario: geometry from its spec. Raises ValueError
     (the message names the field) for a sensor the robot lacks or a distance too short."""
-    spec = ctx.spec
-    sensors = {s.name: s for s in spec.sensors}  # type: ignore[attr-defined]
+    spec: Any = ctx.spec
+    sensors = {s.name: s for s in spec.sensors}
     if cfg.sensor not in sensors:
         raise ValueError(
             f"sensor: the robot has no sensor {cfg.sensor!r} "
             f"(it has {', '.join(sorted(sensors)) or 'none'})"
         )
-    sweep = math.hypot(spec.body_length_m / 2.0, spec.body_width_m / 2.0)  # type: ignore[attr-defined]
+    sweep = math.hypot(spec.body_length_m / 2.0, spec.body_width_m / 2.0)
     if cfg.distance_m < sweep:
         raise ValueError(
             f"distance_m: {cfg.distance_m} m is too close for a body that sweeps "
             f"{sweep:.2f} m turning on the spot; use at least {math.ceil(sweep * 100) / 100:.2f}"
         )
-    return WallFollower(
-        side=cfg.side,
-        sensor=cfg.sensor,
-        distance_m=cfg.distance_m,
-        speed_m_s=cfg.speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        body_length_m=spec.body_length_m,  # type: ignore[attr-defined]
-        body_width_m=spec.body_width_m,  # type: ignore[attr-defined]
-        body_offset_x_m=spec.body_offset_x_m,  # type: ignore[attr-defined]
+    return construct(
+        WallFollower,
+        cfg,
+        body_length_m=spec.body_length_m,
+        body_width_m=spec.body_width_m,
+        body_offset_x_m=spec.body_offset_x_m,
         sensor_mount_xy_m=sensors[cfg.sensor].mount_xy_m,
-        heading_source=cfg.heading_source,
     )
 
 
@@ -422,41 +378,38 @@ def build_marker_search(cfg: MarkerSearchConfig, ctx: ControllerContext) -> Mark
             f"marker_id: {cfg.marker_id} is not in {cfg.dictionary}, which holds ids "
             f"0..{ids - 1}; such a marker cannot exist"
         )
-    spec = ctx.spec
+    spec: Any = ctx.spec
     cams = {c.name: c for c in getattr(spec, "cameras", ())}
     if cfg.camera not in cams:
         raise ValueError(
             f"camera: the robot has no camera {cfg.camera!r} (it has "
             f"{', '.join(sorted(cams)) or 'none'}; add {{type: camera}} to its sensors)"
         )
-    if not Mobility.of(spec.model).can_spin:  # type: ignore[attr-defined]
+    if not Mobility.of(spec.model).can_spin:
         raise ValueError(
             "marker_search turns on the spot: use a model that can (differential, mecanum, "
             "omni3, or a tricycle with max_steer_rad >= pi/2)"
         )
-    return MarkerSearch(
-        cams[cfg.camera],
-        cfg.marker_id,
-        dictionary=cfg.dictionary,
-        stop_distance_m=cfg.stop_distance_m,
-        speed_m_s=cfg.speed_m_s,
-        turn_rate_rad_s=cfg.turn_rate_rad_s,
-        body_half_width_m=spec.body_width_m / 2.0,  # type: ignore[attr-defined]
-        body_front_m=spec.body_offset_x_m + spec.body_length_m / 2.0,  # type: ignore[attr-defined]
-        body_height_m=spec.height_m,  # type: ignore[attr-defined]
-        clearance_m=cfg.clearance_m,
-        leg_m=cfg.leg_m,
-        pose_source=cfg.pose_source,
+    return construct(
+        MarkerSearch,
+        cfg,
+        camera=cams[cfg.camera],
+        body_half_width_m=spec.body_width_m / 2.0,
+        body_front_m=spec.body_offset_x_m + spec.body_length_m / 2.0,
+        body_height_m=spec.height_m,
     )
 
 
-BEHAVIOURS: dict[type[BaseModel], Callable[[Any, ControllerContext], Any]] = {
-    GoalConfig: build_goal,
-    WaypointsConfig: build_waypoints,
-    MazeSolverConfig: build_maze_solver,
-    PursueConfig: build_pursue,
-    EvadeConfig: build_evade,
-    TeleopConfig: build_teleop,
-    WallFollowConfig: build_wall_follow,
-    MarkerSearchConfig: build_marker_search,
+# ---------------------------------------------------------------------------------- registry
+# Every controller type of a scenario file: type tag -> its config class and builder
+BEHAVIOURS: dict[str, Behaviour] = {
+    **BASIC,  # script, avoid, python, idle
+    "goto_goal": Behaviour(GoalConfig, build=build_goal, keep_clear=True),
+    "waypoints": Behaviour(WaypointsConfig, build=build_waypoints, keep_clear=True),
+    "maze_solver": Behaviour(MazeSolverConfig, build=build_maze_solver, keep_clear=True),
+    "pursue": Behaviour(PursueConfig, build=build_pursue),  # meant to reach its target
+    "evade": Behaviour(EvadeConfig, build=build_evade, keep_clear=True),
+    "teleop": Behaviour(TeleopConfig, build=build_teleop),  # the user drives
+    "wall_follow": Behaviour(WallFollowConfig, build=build_wall_follow, keep_clear=True),
+    "marker_search": Behaviour(MarkerSearchConfig, build=build_marker_search, keep_clear=True),
 }

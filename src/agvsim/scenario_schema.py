@@ -26,13 +26,29 @@ from pydantic import (
 )
 
 from agvsim.behaviours import BEHAVIOURS
-from agvsim.config_base import StrictConfig
+from agvsim.config_base import StrictConfig, did_you_mean
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
 from agvsim.kinematics import MODELS
 from agvsim.master.config import MasterConfig
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
+from agvsim.scenario_controllers import (  # the basic controller configs, re-exported
+    AvoidConfig as AvoidConfig,
+)
+from agvsim.scenario_controllers import (
+    ControllerConfigBase,
+    IdleConfig,
+)
+from agvsim.scenario_controllers import (
+    PythonControllerConfig as PythonControllerConfig,
+)
+from agvsim.scenario_controllers import (
+    ScriptConfig as ScriptConfig,
+)
+from agvsim.scenario_controllers import (
+    ScriptStepConfig as ScriptStepConfig,
+)
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
 from agvsim.scenario_params import PARAMS
 from agvsim.sim.spec import ControlMode
@@ -243,60 +259,13 @@ class OdometryConfig(StrictConfig):
     steering_noise_deg: float = Field(default=0.0, ge=0)
 
 
-class ScriptStepConfig(StrictConfig):
-    duration_s: float = Field(gt=0)
-    twist: list[float] | None = Field(default=None, description="[vx, omega] or [vx, vy, omega]")
-    wheels: list[float] | None = Field(default=None, description="driven wheel speeds, rad/s")
-    steering_deg: float = 0.0
-
-    @model_validator(mode="after")
-    def _one_kind(self) -> ScriptStepConfig:
-        if (self.twist is None) == (self.wheels is None):
-            raise ValueError("each script step needs exactly one of 'twist' or 'wheels'")
-        if self.twist is not None and len(self.twist) not in (2, 3):
-            raise ValueError(f"twist must be [vx, omega] or [vx, vy, omega], got {self.twist}")
-        return self
-
-
-class ScriptConfig(StrictConfig):
-    type: Literal["script"]
-    steps: list[ScriptStepConfig] = Field(min_length=1)
-    loop: bool = False
-
-
-class AvoidConfig(StrictConfig):
-    type: Literal["avoid"]
-    sensor: str = "rangers"
-    trigger_m: float = Field(default=0.8, gt=0)
-    speed_m_s: float = Field(default=0.5, gt=0)
-    turn_rate_rad_s: float = Field(default=1.0, gt=0)
-    heading_source: Literal["true_pose", "odometry"] = "true_pose"
-    side_clearance_m: float | None = Field(
-        default=None, gt=0, description="kept off side walls while driving; default 0.8 x trigger_m"
-    )
-
-
-class PythonControllerConfig(StrictConfig):
-    type: Literal["python"]
-    file: PathText = Field(description="a .py file next to the scenario (or an absolute path)")
-    name: str = Field(
-        default="controller",
-        min_length=1,
-        max_length=200,
-        description="function or class in the file",
-    )
-
-
-class IdleConfig(StrictConfig):
-    type: Literal["idle"]
-
-
-# Behaviours that bring their own config and builder (agvsim.behaviours.BEHAVIOURS) join the
-# built-in controller types here
-ControllerConfig = Annotated[
-    Union[(ScriptConfig, AvoidConfig, PythonControllerConfig, IdleConfig, *BEHAVIOURS)],  # noqa: UP007
-    Field(discriminator="type"),
-]
+if TYPE_CHECKING:
+    ControllerConfig: TypeAlias = ControllerConfigBase
+else:  # every controller type of the registry (agvsim.behaviours.BEHAVIOURS), on "type"
+    ControllerConfig = Annotated[
+        Union[tuple(b.config for b in BEHAVIOURS.values())],  # noqa: UP007
+        Field(discriminator="type"),
+    ]
 
 
 class MetricsConfig(StrictConfig):
@@ -372,22 +341,25 @@ class _RobotBase(StrictConfig):
 
 # One robot config class a kinematic model (kinematics.MODELS), its params typed from the
 # model's dataclass (agvsim.scenario_params)
-ROBOT_CONFIGS: dict[str, type[_RobotBase]] = {
-    kind: create_model(  # type: ignore[call-overload]
+def _robot_config(kind: str, params: type[StrictConfig]) -> type[_RobotBase]:
+    tag: Any = Literal[kind]
+    return create_model(
         f"{MODELS[kind].__name__}Robot",
         __base__=_RobotBase,
-        model=(Literal[kind], ...),
+        model=(tag, ...),
         params=(params, Field(default=params(), description=f"{kind} parameters")),
     )
-    for kind, params in PARAMS.items()
-}
+
+
+ROBOT_CONFIGS = {kind: _robot_config(kind, params) for kind, params in PARAMS.items()}
 
 # A robot whose model is missing or unknown: its fields are still checked, so that one
 # refusal lists every fault ("model: required", "unknown key 'modle'", ...)
+_ANY_MODEL: Any = Literal[tuple(MODELS)]
 _UnknownModelRobot = create_model(
     "UnknownModelRobot",
     __base__=_RobotBase,
-    model=(Literal[tuple(MODELS)], ...),
+    model=(_ANY_MODEL, ...),
     params=(dict[Name, Any], {}),
 )
 UNKNOWN_MODEL = "?"  # its tag
@@ -468,7 +440,7 @@ class Scenario(StrictConfig):
             shown = dup[:20] + ([f"... {len(dup) - 20} more"] if len(dup) > 20 else [])
             raise ValueError(f"robot names must be unique; repeated: {shown}")
         m = self.metrics
-        named = [("capture.pursuer", m.capture and m.capture.pursuer)]
+        named: list[tuple[str, Any]] = [("capture.pursuer", m.capture and m.capture.pursuer)]
         named += [("capture.evader", m.capture and m.capture.evader)]
         named += [("reach.robot", m.reach and m.reach.robot)]
         named += [("coverage.robot", m.coverage and m.coverage.robot)]
@@ -476,14 +448,14 @@ class Scenario(StrictConfig):
             if name and name not in counts:
                 raise ValueError(
                     f"metrics.{field}: {short_repr(name)} is not a robot"
-                    + _did_you_mean(name, list(counts)[:50])
+                    + did_you_mean(name, list(counts)[:50])
                 )
         for k, r in enumerate(self.robots):
             for other in r.knows:
                 if other not in counts or other == r.name:
                     raise ValueError(
                         f"robots[{k}].knows: {other!r} is not another robot"
-                        + _did_you_mean(other, [n for n in names if n != r.name])
+                        + did_you_mean(other, [n for n in names if n != r.name])
                     )
         return self
 
@@ -544,12 +516,6 @@ def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
     return names
 
 
-def _did_you_mean(word: str, options: list[str]) -> str:
-    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    return f"{hint} (allowed: {', '.join(sorted(options))})"
-
-
 MAX_PROBLEMS = 30  # listed in one refusal; the rest are counted
 
 
@@ -580,13 +546,13 @@ def _format_errors(err: ValidationError) -> list[str]:
             key, kind = str(loc[-1]), str(loc[2])
             out.append(
                 f"{_loc(_untagged(loc[:-1]))}: unknown parameter {short_repr(key)} for model "
-                f"{kind!r}" + _did_you_mean(key, list(PARAMS[kind].model_fields))
+                f"{kind!r}" + did_you_mean(key, list(PARAMS[kind].model_fields))
             )
         elif e["type"] == "extra_forbidden":
             key = str(loc[-1])
             out.append(
                 f"{where}: unknown key {short_repr(key)}"
-                + _did_you_mean(key, _fields_at(Scenario, loc))
+                + did_you_mean(key, _fields_at(Scenario, loc))
             )
         elif e["type"] == "literal_error" and isinstance(e.get("input"), str):
             opts = re.findall(r"'([^']*)'", str(e.get("ctx", {}).get("expected", "")))
@@ -601,7 +567,7 @@ def _format_errors(err: ValidationError) -> list[str]:
             tag = ctx.get("tag", "?")
             expected = ctx.get("expected_tags", "")
             opts = [t.strip(" '") for t in str(expected).split(",")]
-            out.append(f"{where}: unknown type {short_repr(tag)}" + _did_you_mean(str(tag), opts))
+            out.append(f"{where}: unknown type {short_repr(tag)}" + did_you_mean(str(tag), opts))
         else:
             msg = e["msg"].removeprefix("Value error, ")
             if e["type"] == "finite_number":

@@ -17,6 +17,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel
 
+from agvsim.behaviours import BEHAVIOURS
 from agvsim.kinematics import MODELS
 from agvsim.safe_yaml import YamlInputError, load_yaml
 from agvsim.scenario import default_camera_height, default_rate_hz
@@ -25,7 +26,6 @@ from agvsim.scenario_params import PARAMS
 from agvsim.scenario_schema import (
     Body,
     CameraConfig,
-    ControllerConfig,
     LidarConfig,
     Pose,
     RangersConfig,
@@ -48,13 +48,7 @@ class Field:
 
 def controller_types(allow_python: bool = False) -> list[str]:
     """Every controller ``type`` a scenario accepts (python only when allowed)."""
-    union = typing.get_args(typing.get_args(ControllerConfig)[0])
-    out = []
-    for cls in union:
-        (tag,) = typing.get_args(cls.model_fields["type"].annotation)
-        if tag != "python" or allow_python:
-            out.append(tag)
-    return out
+    return [tag for tag in BEHAVIOURS if tag != "python" or allow_python]
 
 
 # which keys of each sensor the panel shows; defaults and labels come from the schema
