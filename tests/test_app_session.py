@@ -86,6 +86,32 @@ def test_changing_the_model_gives_its_own_parameters():
     assert s.sim.state.distance_m[0] > 0.5
 
 
+def test_the_mask_reads_defaults_and_labels_from_the_schema():
+    robot = {"name": "car", "model": "ackermann", "sensors": [{"type": "rangers"}]}
+    fields = {f.key: f for f in mask_fields(robot, dt_s=0.05)}
+    geometry = fields["params.steering_geometry"]
+    assert (geometry.kind, geometry.value, geometry.options) == (
+        "dropdown",
+        "ackermann",
+        ("ackermann", "parallel"),
+    )
+    steer = fields["params.max_steer_rad"]
+    assert (steer.label, steer.value) == ("max steer (rad)", float(np.deg2rad(35.0)))
+    assert steer.hint == "steering angle limit"
+    # the rangers tick every step of the scenario (1 / dt_s), the lidar at 10 Hz
+    assert fields["sensors.rangers.rate_hz"].value == pytest.approx(20.0)
+    assert fields["sensors.lidar.rate_hz"].value == 10.0
+    assert fields["sensors.lidar.fov_deg"].label == "lidar field of view (deg)"
+    assert fields["sensors.lidar.beams"].kind == "int"
+    # shown defaults stay unset in the entry when the panel hands them back unchanged
+    values = {k: f.value for k, f in fields.items()}
+    assert robot_from_mask(robot, values, dt_s=0.05)["sensors"] == [{"type": "rangers"}]
+    values["sensors.rangers.rate_hz"] = 50.0  # not the default at dt_s = 0.05: written
+    assert robot_from_mask(robot, values, dt_s=0.05)["sensors"] == [
+        {"type": "rangers", "rate_hz": 50.0}
+    ]
+
+
 def test_a_camera_set_in_the_mask_is_built_and_removed():
     s = session(controller={"type": "idle"})
     fields = {f.key: f for f in mask_fields(s.robot_config("agv"))}

@@ -80,5 +80,5 @@ def test_locate_turns_a_frame_into_the_stop_pose():
 def test_marker_search_needs_a_camera():
     data = load_scenario(SCENARIO).model_dump()
     data["robots"][0]["sensors"] = [{"type": "lidar"}]
-    with pytest.raises(ScenarioError, match=r"controller: camera: the robot has no camera"):
+    with pytest.raises(ScenarioError, match=r"controller\.camera: the robot has no camera"):
         build(parse_scenario(data))

@@ -225,7 +225,7 @@ def test_huge_finite_numbers_are_refused():
     data["robots"][0]["sensors"][0]["angle_min_deg"] = -45.0
     assert parse_scenario(data).robots[0].controller.goal_x_m == 1e12
     data["robots"][0]["params"] = {"wheel_radius_m": 10**400}  # no float holds it
-    with pytest.raises(ScenarioError, match=r"params: wheel_radius_m: too large"):
+    with pytest.raises(ScenarioError, match=r"robots\[0\]\.params\.wheel_radius_m: too large"):
         parse_scenario(data)
     # every block alike, those of other modules too (checked before validation)
     data["robots"][0]["params"] = {}

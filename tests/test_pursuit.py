@@ -22,7 +22,7 @@ from agvsim.control.api import ControllerContext, LaserScan, Observation, Twist,
 from agvsim.control.pursuit import Evader, FreeSpace, Pursuer
 from agvsim.kinematics import DifferentialDrive
 from agvsim.metrics.capture import Capture, CaptureConfig, build_capture
-from agvsim.scenario import RobotConfig, WorldConfig, build_grid, robot_spec
+from agvsim.scenario import WorldConfig, build_grid, parse_robot, robot_spec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import ControlMode, RobotSpec, World
 from agvsim.world.grid import OccupancyGrid
@@ -51,7 +51,7 @@ def thesis_case(
     grid = build_grid(WorldConfig.model_validate(data["world"]), ROOT)
     rows = [dict(r) for r in data["robots"]]
     controllers = [r.pop("controller") for r in rows]
-    specs = [robot_spec(RobotConfig.model_validate(r), r["name"], data["dt_s"]) for r in rows]
+    specs = [robot_spec(parse_robot(r), r["name"], data["dt_s"]) for r in rows]
     if poses is not None:
         specs = [replace(s, initial_pose=tuple(p)) for s, p in zip(specs, poses, strict=True)]
     if mode is not None:

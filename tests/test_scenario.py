@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agvsim.kinematics import MODELS
 from agvsim.scenario import (
@@ -25,6 +27,7 @@ from agvsim.scenario import (
     load_scenario,
     parse_scenario,
 )
+from agvsim.scenario_params import PARAMS
 
 ROOT = Path(__file__).resolve().parents[1]
 BAD = Path(__file__).resolve().parent / "data" / "bad_scenarios"
@@ -452,16 +455,14 @@ def test_ros_map_file_loads(tmp_path):
     assert sim.world.grid.resolution_m == 0.5
 
 
-def test_quoted_number_param_is_refused_or_converted():
+def test_quoted_number_param_is_refused():
     data = _one_robot(
         params={"wheel_radius_m": "0.1"},
         controller={"type": "script", "steps": [{"duration_s": 1, "twist": [1, 0]}]},
     )
-    try:
-        sim = build(parse_scenario(data))
-    except ScenarioError:
-        return
-    sim.step()
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(data)
+    assert info.value.problems == ["robots[0].params.wheel_radius_m: must be a number (got '0.1')"]
 
 
 def test_python_controller_with_syntax_error_is_refused(tmp_path):
@@ -470,3 +471,92 @@ def test_python_controller_with_syntax_error_is_refused(tmp_path):
     with pytest.raises(ScenarioError) as info:
         build(parse_scenario(data), base_dir=tmp_path)
     _assert_clear(str(info.value), R0 + r"\.controller\.file\b", ["broken.py", "line 1"])
+
+
+# ------------------------------------------------------------------ model parameters typed once
+def _params_problems(model: str, params: dict) -> list[str]:
+    data = _one_robot(model=model, params=params)
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(data)
+    return info.value.problems
+
+
+@pytest.mark.parametrize("kind", list(MODELS))
+def test_params_block_is_the_model_dataclass(kind):
+    """Each model's ``params`` block has exactly the dataclass's fields and defaults."""
+    block = PARAMS[kind].model_fields
+    assert list(block) == [f.name for f in fields(MODELS[kind])]
+    for f in fields(MODELS[kind]):
+        assert block[f.name].default is f.default
+        assert block[f.name].description  # the panel's hint
+
+
+@pytest.mark.parametrize(
+    "kind,name",
+    [
+        (k, f.name)
+        for k, cls in MODELS.items()
+        for f in fields(cls)
+        if f.name != "steering_geometry"
+    ],
+)
+@pytest.mark.parametrize("value", [0, -0.25, -1e9])
+def test_non_positive_params_are_refused_in_the_file_and_in_python(kind, name, value):
+    """One declaration, two checks: the schema and the dataclass refuse the same value."""
+    problems = _params_problems(kind, {name: value})
+    (line,) = problems
+    assert line.startswith(f"robots[0].params.{name}: must be a positive number")
+    assert line.endswith(f"(got {value!r})")
+    with pytest.raises(ValueError, match=rf"{MODELS[kind].__name__}\.{name} must be a positive"):
+        MODELS[kind](**{name: value})
+
+
+@given(st.floats(min_value=np.pi / 2, max_value=1e12))
+@settings(max_examples=25, deadline=None)
+def test_ackermann_steering_limit_must_be_below_a_right_angle(limit):
+    problems = _params_problems("ackermann", {"max_steer_rad": limit})
+    assert problems == [
+        f"robots[0].params.max_steer_rad: must be a positive number below pi/2 rad (90 deg) "
+        f"(got {limit!r})"
+    ]
+    assert parse_scenario(_one_robot(model="ackermann", params={"max_steer_rad": 1.5}))
+
+
+def test_text_params_are_a_choice_with_did_you_mean():
+    assert _params_problems("ackermann", {"steering_geometry": "paralel"}) == [
+        "robots[0].params.steering_geometry: 'paralel' is not allowed; did you mean 'parallel'? "
+        "(allowed: ackermann, parallel)"
+    ]
+    assert _params_problems("mecanum", {"half_lenght_m": 0.2, "wheel_radius_m": True}) == [
+        "robots[0].params.wheel_radius_m: must be a number (got True)",
+        "robots[0].params: unknown parameter 'half_lenght_m' for model 'mecanum'; did you mean "
+        "'half_length_m'? (allowed: half_length_m, half_width_m, max_wheel_speed_rad_s, "
+        "wheel_radius_m)",
+    ]
+
+
+def test_params_keep_what_the_file_wrote():
+    """An integer stays an integer (the model and a recording see what was written); unset
+    parameters take the dataclass's defaults."""
+    data = _one_robot(model="ackermann", params={"wheelbase_m": 1, "half_track_m": 0.25})
+    sc = parse_scenario(data)
+    rc = sc.robots[0]
+    assert sc.model_dump(mode="json", exclude_unset=True)["robots"][0]["params"] == {
+        "wheelbase_m": 1,
+        "half_track_m": 0.25,
+    }
+    model = build(sc).robots[0].model
+    assert model.wheelbase_m == 1 and type(model.wheelbase_m) is int
+    assert model.max_steer_rad == np.deg2rad(35.0) and rc.params.steering_geometry == "ackermann"
+
+
+def test_a_robot_without_a_known_model_is_still_checked_field_by_field():
+    data = _one_robot(model="omni4", body={"lenght_m": 1.0})
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(data)
+    assert info.value.problems == [
+        "robots[0].model: 'omni4' is not allowed; did you mean 'omni3'? (allowed: differential, "
+        "tricycle, ackermann, mecanum, omni3)",
+        "robots[0].body.lenght_m: unknown key 'lenght_m'; did you mean 'length_m'? (allowed: "
+        "length_m, offset_x_m, width_m)",
+    ]

@@ -211,7 +211,7 @@ def test_cases_change_several_values_together(tmp_path):
         ),
         (
             {"vary": {"robots.0.params.wheel_radius_m": [0.1, -0.2]}},
-            ["variation 1 (wheel_radius_m=-0.2)", "robots[0] (r).params", "-0.2"],
+            ["variation 1 (wheel_radius_m=-0.2)", "robots[0].params.wheel_radius_m", "-0.2"],
         ),
         (
             {"vary": {"robots.0.controller.steps.0.twst": [[0.1, 0]]}},

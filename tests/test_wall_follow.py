@@ -32,7 +32,7 @@ from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.control.wall_follow import WallFollower
 from agvsim.kinematics import DifferentialDrive
 from agvsim.metrics.coverage import CorridorCoverage, CoverageConfig, build_coverage
-from agvsim.scenario import RobotConfig, robot_spec
+from agvsim.scenario import parse_robot, robot_spec
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import OdometrySpec, RobotSpec, World
@@ -66,18 +66,20 @@ TOUR_LIMIT_S = 900.0
 
 def _robot(model: str, mode: str, pose, sensors=None) -> RobotSpec:
     params, body = ROBOTS[model]
-    rc = RobotConfig(
-        name=model,
-        model=model,
-        mode=mode,
-        params=params,
-        body=body,
-        pose={"x_m": pose[0], "y_m": pose[1], "theta_deg": pose[2]},
-        sensors=sensors
-        or [
-            {"type": "lidar", "beams": 240, "range_max_m": 10.0, "rate_hz": 10.0},
-            {"type": "rangers", "range_max_m": 1.5},
-        ],
+    rc = parse_robot(
+        {
+            "name": model,
+            "model": model,
+            "mode": mode,
+            "params": params,
+            "body": body,
+            "pose": {"x_m": pose[0], "y_m": pose[1], "theta_deg": pose[2]},
+            "sensors": sensors
+            or [
+                {"type": "lidar", "beams": 240, "range_max_m": 10.0, "rate_hz": 10.0},
+                {"type": "rangers", "range_max_m": 1.5},
+            ],
+        }
     )
     return robot_spec(rc, "robots[0]", 0.02)
 

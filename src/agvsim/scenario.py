@@ -7,9 +7,8 @@ ready ``Simulation``. The schema is documented in docs/scenario.md.
 
 from __future__ import annotations
 
-import importlib.util
-import inspect
 import math
+import re
 from dataclasses import fields as dc_fields
 from dataclasses import replace
 from pathlib import Path
@@ -19,14 +18,12 @@ import numpy as np
 from pydantic import ValidationError
 
 from agvsim.behaviours import BEHAVIOURS
-from agvsim.control.adapters import WheelsFromTwist
 from agvsim.control.api import ControllerContext
-from agvsim.control.avoid import ObstacleAvoidance
-from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.control.traffic import KeepClear, RobotSight, StaticMap, sight_sensor
 from agvsim.dynamics.vehicle import check_dynamics
-from agvsim.kinematics import MODELS, stack_models, wrap_angle
+from agvsim.kinematics import wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
+from agvsim.scenario_controllers import cone_beams as cone_beams  # re-exported
 from agvsim.scenario_dynamics import dynamics_spec, floor_spec
 from agvsim.scenario_limits import (
     MAX_MAGNITUDE,
@@ -35,28 +32,25 @@ from agvsim.scenario_limits import (
     check_robot_count,
     check_scenario,
 )
+from agvsim.scenario_params import build_model
 from agvsim.scenario_schema import (
-    AvoidConfig,
     CameraConfig,
     LidarConfig,
-    PythonControllerConfig,
     RangersConfig,
     RobotConfig,
     Scenario,
-    ScriptConfig,
     WorldConfig,
-    _did_you_mean,
     _format_errors,
     _loc,
 )
 from agvsim.scenario_schema import _models_in as _models_in  # re-exported
+from agvsim.scenario_schema import parse_robot as parse_robot  # re-exported
 from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import (
     BODY_HEIGHT_M,
     WALL_HEIGHT_M,
-    ControlMode,
     OdometrySpec,
     RobotSpec,
     World,
@@ -240,36 +234,6 @@ def build_grid(cfg: WorldConfig, base_dir: Path, limits: Limits | None = None) -
     return grid
 
 
-def _model(rc: RobotConfig, where: str) -> Any:
-    cls = MODELS[rc.model]
-    allowed = [f.name for f in dc_fields(cls)]
-    kwargs: dict[str, Any] = {}
-    for k, v in rc.params.items():
-        if k not in allowed:
-            raise ScenarioError(
-                "",
-                [
-                    f"{where}.params: unknown parameter {k!r} for model "
-                    f"{rc.model!r}" + _did_you_mean(k, allowed)
-                ],
-            )
-        default = next(f.default for f in dc_fields(cls) if f.name == k)
-        numeric = isinstance(default, int | float | np.floating)
-        if numeric and (isinstance(v, str | bool) or not isinstance(v, int | float)):
-            raise ScenarioError("", [f"{where}.params.{k}: must be a number, got {v!r}"])
-        if numeric and not (abs(v) <= 1e12 and math.isfinite(v)):  # abs first: a huge int
-            raise ScenarioError(
-                "", [f"{where}.params.{k}: {v!r} is not allowed (a finite number, |x| <= 1e12)"]
-            )
-        if not numeric and not isinstance(v, str):
-            raise ScenarioError("", [f"{where}.params.{k}: must be text, got {v!r}"])
-        kwargs[k] = v
-    try:
-        return cls(**kwargs)
-    except (ValueError, TypeError) as err:
-        raise ScenarioError("", [f"{where}.params: {err}"]) from None
-
-
 def _sensor(
     sc: RangersConfig | LidarConfig, mount_x: float, rate_default: float
 ) -> RangeSensorSpec:
@@ -296,6 +260,12 @@ def _sensor(
 def default_camera_height(wheel_radius_m: float) -> float:
     """Where a camera without ``mount_z_m`` sits: 5 cm above the robot's body (m)."""
     return float(wheel_radius_m) + BODY_HEIGHT_M + 0.05
+
+
+def default_rate_hz(sensor_type: str, dt_s: float) -> float:
+    """The rate of a range sensor without ``rate_hz``: the thesis's rangers every step, a
+    lidar 10 Hz."""
+    return 10.0 if sensor_type == "lidar" else 1.0 / dt_s
 
 
 def _camera(sc: CameraConfig, rc: RobotConfig, model: Any, offset: float) -> CameraSpec:
@@ -375,7 +345,7 @@ def robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
 
 
 def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
-    model = _model(rc, where)
+    model = build_model(rc.model, rc.params)
     # car-like bodies sit ahead of the rear axle; others are centred on P
     offset = rc.body.offset_x_m
     if offset is None:
@@ -386,7 +356,7 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
             if isinstance(sc, CameraConfig):
                 cameras.append(_camera(sc, rc, model, offset))
             else:
-                sensors.append(_sensor(sc, offset, 10.0 if sc.type == "lidar" else 1.0 / dt_s))
+                sensors.append(_sensor(sc, offset, default_rate_hz(sc.type, dt_s)))
         except ValueError as err:
             raise ScenarioError("", [f"{where}.sensors[{k}]: {err}"]) from None
     names = [s.name for s in sensors] + [c.name for c in cameras]
@@ -421,173 +391,62 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
     return spec
 
 
-def _load_python(cfg: PythonControllerConfig, base_dir: Path, where: str) -> Any:
-    path = Path(cfg.file)
-    if not path.is_absolute():
-        path = base_dir / path
-    if not path.is_file():
-        raise ScenarioError("", [f"{where}.controller.file: no such file {str(path)!r}"])
-    if path.suffix != ".py":
-        raise ScenarioError(
-            "", [f"{where}.controller.file: {path.name!r} must be a Python file ending in .py"]
-        )
-    spec = importlib.util.spec_from_file_location(f"agvsim_user_{path.stem}", path)
-    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-    try:
-        spec.loader.exec_module(module)  # type: ignore[union-attr]
-    except (Exception, SystemExit) as err:  # noqa: BLE001 - the user's file: report, don't crash
-        line = f" (line {err.lineno})" if isinstance(err, SyntaxError) and err.lineno else ""
-        raise ScenarioError(
-            "",
-            [
-                f"{where}.controller.file: {path.name} could not be loaded{line}: "
-                f"{type(err).__name__}: {err}"
-            ],
-        ) from None
-    obj = getattr(module, cfg.name, None)
-    if obj is None:
-        found = [n for n in vars(module) if not n.startswith("_")]
-        raise ScenarioError(
-            "",
-            [
-                f"{where}.controller.name: {cfg.name!r} is not defined in {path.name}"
-                + _did_you_mean(cfg.name, found)
-            ],
-        )
-    # a class, or a function taking no argument, makes the controller; anything else
-    # (a function of obs, an object with step()) is the controller itself
-    if isinstance(obj, type) or (callable(obj) and _takes_no_arguments(obj)):
-        try:
-            return obj()
-        except (Exception, SystemExit) as err:  # noqa: BLE001 - the user's code: report
-            raise ScenarioError(
-                "", [f"{where}.controller.name: {cfg.name}() failed: {type(err).__name__}: {err}"]
-            ) from None
-    return obj
-
-
-def _takes_no_arguments(fn: Any) -> bool:
-    try:
-        params = inspect.signature(fn).parameters.values()
-    except (TypeError, ValueError):
-        return False
-    return not any(
-        p.default is inspect.Parameter.empty
-        and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
-        for p in params
-    )
-
-
 def _bindings(
     sc: Scenario, specs: list[RobotSpec], base_dir: Path, grid: OccupancyGrid, boxes: np.ndarray
 ) -> list[Binding]:
+    """Every robot's controller, built one way through the registry (agvsim.behaviours):
+    one binding a robot, then one a group for batched types (robots sharing a config)."""
     out: list[Binding] = []
     static = StaticMap.of(grid, boxes)
-    avoid_groups: dict[tuple, list[int]] = {}
     names = tuple(r.name for r in sc.robots)
+    groups: dict[tuple, list[ControllerContext]] = {}
     for i, rc in enumerate(sc.robots):
-        c, where = rc.controller, f"robots[{i}] ({rc.name})"
-        if type(c) in BEHAVIOURS:
-            ctx = ControllerContext(i, specs[i], grid, names, base_dir, static)
-            try:
-                ctrl = BEHAVIOURS[type(c)](c, ctx)
-            except ValueError as err:
-                raise ScenarioError("", [f"{where}.controller: {err}"]) from None
-            out.append(Binding(_keep_clear(ctrl, c, specs[i], static), (i,)))
-        elif isinstance(c, ScriptConfig):
-            steps = []
-            for st in c.steps:
-                twist = None
-                if st.twist is not None:
-                    tw = st.twist
-                    twist = (tw[0], 0.0, tw[1]) if len(tw) == 2 else (tw[0], tw[1], tw[2])
-                if st.wheels is not None:
-                    want = len(specs[i].model.driven_wheels)
-                    if len(st.wheels) != want:
-                        raise ScenarioError(
-                            "",
-                            [
-                                f"{where}.controller.steps: a {rc.model} robot has {want} driven "
-                                f"wheel(s) {_driven_names(specs[i])}, got {len(st.wheels)} speeds "
-                                f"{st.wheels}"
-                            ],
-                        )
-                steps.append(
-                    ScriptStep(
-                        st.duration_s,
-                        twist,
-                        None if st.wheels is None else tuple(st.wheels),
-                        float(np.deg2rad(st.steering_deg)),
-                    )
-                )
-            out.append(Binding(ScriptController(steps, c.loop), (i,)))
-        elif isinstance(c, AvoidConfig):
-            names = [s.name for s in specs[i].sensors]
-            if c.sensor not in names:
-                raise ScenarioError(
-                    "",
-                    [
-                        f"{where}.controller.sensor: the robot has no sensor "
-                        f"{c.sensor!r}" + _did_you_mean(c.sensor, names)
-                    ],
-                )
-            key = (c, rc.model, rc.mode, rc.params.get("steering_geometry"))
-            avoid_groups.setdefault(key, []).append(i)
-        elif isinstance(c, PythonControllerConfig):
-            out.append(Binding(_load_python(c, base_dir, where), (i,), user_code=True))
-    for (c, _model_kind, mode, _geo), idx in avoid_groups.items():
-        spec0 = specs[idx[0]]
-        sensor = next(s for s in spec0.sensors if s.name == c.sensor)
-        front, back = cone_beams(sensor)
-        car = [not _can_spin(specs[i].model) for i in idx]
-        ctrl: Any = ObstacleAvoidance(
-            sensor=c.sensor,
-            front_beams=front,
-            back_beams=back,
-            trigger_m=c.trigger_m,
-            speed_m_s=c.speed_m_s,
-            turn_rate_rad_s=c.turn_rate_rad_s,
-            heading_source=c.heading_source,
-            side_clearance_m=c.side_clearance_m,
-            can_spin=~np.array(car),
-            sight=RobotSight.for_robots([specs[i] for i in idx], static, sight_sensor(spec0) or ""),
-        )
-        if mode == ControlMode.FORWARD:
-            ctrl = WheelsFromTwist(ctrl, stack_models([specs[i].model for i in idx]))
-        out.append(Binding(ctrl, tuple(idx), batch=True))
+        cfg, kind = rc.controller, BEHAVIOURS[rc.controller.type]
+        ctx = ControllerContext(i, specs[i], grid, names, base_dir, static)
+        try:
+            if kind.check is not None:
+                kind.check(cfg, ctx)
+            if kind.build_group is not None:
+                groups.setdefault(_group_key(cfg, specs[i]), []).append(ctx)
+                continue
+            ctrl = None if kind.build is None else kind.build(cfg, ctx)
+        except ValueError as err:
+            raise ScenarioError("", [_controller_problem(i, rc.name, cfg, err)]) from None
+        if ctrl is None:
+            continue
+        if kind.keep_clear:
+            ctrl = _keep_clear(ctrl, specs[i], static)
+        out.append(Binding(ctrl, (i,), user_code=kind.user_code))
+    for ctxs in groups.values():
+        cfg = sc.robots[ctxs[0].robot_index].controller
+        build_group = BEHAVIOURS[cfg.type].build_group
+        assert build_group is not None  # only batched types are grouped
+        out.append(Binding(build_group(cfg, ctxs), tuple(c.robot_index for c in ctxs), batch=True))
     return out
 
 
-def _keep_clear(ctrl: Any, cfg: Any, spec: RobotSpec, static: StaticMap) -> Any:
-    """A built-in behaviour, slowed to stop before other robots its lidar sees. Not the
-    teleop (the user drives) nor the pursuer (it is meant to reach its target)."""
-    if cfg.type in ("teleop", "pursue"):
-        return ctrl
+def _group_key(cfg: Any, spec: RobotSpec) -> tuple:
+    """Robots batched in one controller share the config, the model's kind, the control mode
+    and the model's non-numeric parameters (``stack_models`` needs them equal)."""
+    model: Any = spec.model
+    texts = tuple(v for f in dc_fields(model) if isinstance(v := getattr(model, f.name), str))
+    return (cfg, type(model), spec.mode, texts)
+
+
+def _controller_problem(i: int, name: str, cfg: Any, err: ValueError) -> str:
+    """A builder's message under the robot's controller, at the config field it names."""
+    where, msg = f"robots[{i}] ({name}).controller", str(err)
+    head = re.match(r"(\w+)(\[\d+\])?(\.\w+)*: ", msg)
+    if head and head.group(1) in type(cfg).model_fields:
+        return f"{where}.{msg}"
+    return f"{where}: {msg}"
+
+
+def _keep_clear(ctrl: Any, spec: RobotSpec, static: StaticMap) -> Any:
+    """A behaviour, slowed to stop before other robots its lidar sees."""
     sensor = sight_sensor(spec)
     sight = None if sensor is None else RobotSight.for_robots([spec], static, sensor)
     return ctrl if sight is None else KeepClear(ctrl, sight)
-
-
-def _driven_names(spec: RobotSpec) -> list[str]:
-    return [spec.model.wheel_names[k] for k in spec.model.driven_wheels]
-
-
-def _can_spin(model: Any) -> bool:
-    """True when the model can turn on the spot."""
-    if not model.has_steering:
-        return True
-    return bool(np.all(np.asarray(model.max_steer_rad) >= np.pi / 2 - 1e-9))
-
-
-def cone_beams(sensor: RangeSensorSpec, half_deg: float = 15.0) -> tuple[tuple, tuple]:
-    """Beam indices looking ahead and behind (within +-half_deg; the nearest beam at least)."""
-    ang = np.angle(np.exp(1j * (sensor.beam_angles_rad + sensor.mount_yaw_rad)))
-    out = []
-    for centre in (0.0, np.pi):
-        d = np.abs(np.angle(np.exp(1j * (ang - centre))))
-        sel = np.flatnonzero(d <= np.deg2rad(half_deg))
-        out.append(tuple(int(k) for k in (sel if sel.size else [int(np.argmin(d))])))
-    return out[0], out[1]
 
 
 def build(sc: Scenario, seed: int | None = None, base_dir: Path | None = None) -> Simulation:

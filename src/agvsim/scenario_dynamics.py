@@ -7,8 +7,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
+from agvsim.config_base import StrictConfig
 from agvsim.dynamics.spec import (
     DynamicsSpec,
     FloorFriction,
@@ -20,62 +21,65 @@ from agvsim.dynamics.spec import (
 )
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-class MotorConfig(_Strict):
-    gear_ratio: float = Field(20.0, gt=0, le=10000, description="motor turns per wheel turn")
-    torque_max_nm: float = Field(1.0, gt=0, le=1e5, description="peak motor torque (shaft)")
+class MotorConfig(StrictConfig):
+    gear_ratio: float = Field(
+        default=20.0, gt=0, le=10000, description="motor turns per wheel turn"
+    )
+    torque_max_nm: float = Field(default=1.0, gt=0, le=1e5, description="peak motor torque (shaft)")
     stall_torque_nm: float | None = Field(
-        None, gt=0, le=1e5, description="torque-speed line at zero speed; default 3 x peak"
+        default=None, gt=0, le=1e5, description="torque-speed line at zero speed; default 3 x peak"
     )
     no_load_speed_rad_s: float | None = Field(
-        None, gt=0, le=1e6, description="motor shaft speed at zero torque; default: flat curve"
+        default=None,
+        gt=0,
+        le=1e6,
+        description="motor shaft speed at zero torque; default: flat curve",
     )
-    rotor_inertia_kg_m2: float = Field(2e-5, gt=0, le=100)
+    rotor_inertia_kg_m2: float = Field(default=2e-5, gt=0, le=100)
     time_constant_s: float = Field(
-        0.05, gt=0, le=100, description="wheel-speed controller, first order"
+        default=0.05, gt=0, le=100, description="wheel-speed controller, first order"
     )
 
 
-class SteeringActuatorConfig(_Strict):
-    torque_max_nm: float = Field(20.0, gt=0, le=1e5)
-    inertia_kg_m2: float = Field(0.05, gt=0, le=1e3)
-    time_constant_s: float = Field(0.05, gt=0, le=100)
+class SteeringActuatorConfig(StrictConfig):
+    torque_max_nm: float = Field(default=20.0, gt=0, le=1e5)
+    inertia_kg_m2: float = Field(default=0.05, gt=0, le=1e3)
+    time_constant_s: float = Field(default=0.05, gt=0, le=100)
 
 
-class LoadConfig(_Strict):
-    mass_kg: float = Field(0.0, ge=0, le=1e5, description="carried load, a point mass")
-    x_m: float = Field(0.0, ge=-100, le=100, description="load position ahead of P")
-    y_m: float = Field(0.0, ge=-100, le=100, description="load position left of P")
+class LoadConfig(StrictConfig):
+    mass_kg: float = Field(default=0.0, ge=0, le=1e5, description="carried load, a point mass")
+    x_m: float = Field(default=0.0, ge=-100, le=100, description="load position ahead of P")
+    y_m: float = Field(default=0.0, ge=-100, le=100, description="load position left of P")
 
 
-class DynamicsConfig(_Strict):
+class DynamicsConfig(StrictConfig):
     """A robot's planar dynamics; leave the block out for a kinematic robot."""
 
-    mass_kg: float = Field(40.0, gt=0, le=1e5, description="empty robot")
+    mass_kg: float = Field(default=40.0, gt=0, le=1e5, description="empty robot")
     yaw_inertia_kg_m2: float | None = Field(
-        None, gt=0, le=1e6, description="about the centre of mass; default: a uniform box"
+        default=None, gt=0, le=1e6, description="about the centre of mass; default: a uniform box"
     )
     com_x_m: float | None = Field(
-        None, ge=-100, le=100, description="centre of mass ahead of P; default: body centre"
+        default=None, ge=-100, le=100, description="centre of mass ahead of P; default: body centre"
     )
-    com_y_m: float = Field(0.0, ge=-100, le=100)
+    com_y_m: float = Field(default=0.0, ge=-100, le=100)
     load: LoadConfig = LoadConfig()
-    wheel_inertia_kg_m2: float = Field(0.01, gt=0, le=100, description="each wheel, no motor")
+    wheel_inertia_kg_m2: float = Field(
+        default=0.01, gt=0, le=100, description="each wheel, no motor"
+    )
     motor: MotorConfig = MotorConfig()
     steering: SteeringActuatorConfig = SteeringActuatorConfig()
     friction_model: Literal["coulomb", "tyre"] = "coulomb"
     slip_speed_m_s: float = Field(
-        0.05, gt=0, le=10, description="slip speed where friction reaches (about) mu N"
+        default=0.05, gt=0, le=10, description="slip speed where friction reaches (about) mu N"
     )
     max_substep_s: float | None = Field(
-        None, gt=0, le=1, description="cap on the automatic sub-step"
+        default=None, gt=0, le=1, description="cap on the automatic sub-step"
     )
 
 
-class FrictionRegionConfig(_Strict):
+class FrictionRegionConfig(StrictConfig):
     name: str = ""
     x_min_m: float
     y_min_m: float
@@ -93,12 +97,12 @@ class FrictionRegionConfig(_Strict):
         return self
 
 
-class FloorConfig(_Strict):
+class FloorConfig(StrictConfig):
     """Wheel-floor friction for robots with dynamics (kinematic robots ignore it)."""
 
-    mu: float = Field(0.8, gt=0, le=5, description="friction coefficient of the floor")
+    mu: float = Field(default=0.8, gt=0, le=5, description="friction coefficient of the floor")
     regions: list[FrictionRegionConfig] = Field(
-        [], description="rectangles with their own mu (a later one wins where they overlap)"
+        default=[], description="rectangles with their own mu (a later one wins where they overlap)"
     )
 
 

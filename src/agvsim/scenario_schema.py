@@ -7,47 +7,51 @@ Loading and building live in ``agvsim.scenario``, which re-exports the names imp
 from __future__ import annotations
 
 import difflib
-import math
 import re
 from collections import Counter
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias, Union
 
 from pydantic import (
     BaseModel,
-    ConfigDict,
+    Discriminator,
     Field,
     PrivateAttr,
+    Tag,
+    TypeAdapter,
     ValidationError,
+    create_model,
     field_validator,
     model_validator,
 )
 
 from agvsim.behaviours import BEHAVIOURS
+from agvsim.config_base import StrictConfig, did_you_mean
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
+from agvsim.kinematics import MODELS
 from agvsim.master.config import MasterConfig
 from agvsim.metrics.capture import CaptureConfig
 from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
+from agvsim.scenario_controllers import (  # the basic controller configs, re-exported
+    AvoidConfig as AvoidConfig,
+)
+from agvsim.scenario_controllers import (
+    ControllerConfigBase,
+    IdleConfig,
+)
+from agvsim.scenario_controllers import (
+    PythonControllerConfig as PythonControllerConfig,
+)
+from agvsim.scenario_controllers import (
+    ScriptConfig as ScriptConfig,
+)
+from agvsim.scenario_controllers import (
+    ScriptStepConfig as ScriptStepConfig,
+)
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
-from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
+from agvsim.scenario_params import PARAMS
 from agvsim.sim.spec import ControlMode
-
-
-class _Strict(BaseModel):
-    # NaN and inf are refused in every float; text is bounded (names are shorter still)
-    model_config = ConfigDict(
-        extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=100_000
-    )
-
-    @field_validator("*")
-    @classmethod
-    def _not_huge(cls, value: Any) -> Any:
-        if (bad := too_large(value)) is not None:
-            item = f"{bad!r} is " if isinstance(value, list | tuple) else ""
-            raise ValueError(f"{item}too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
-        return value
-
 
 # Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
 Seed = Annotated[int, Field(ge=0, le=2**63 - 1, description="0 .. 2^63 - 1")]
@@ -57,16 +61,16 @@ PathText = Annotated[str, Field(min_length=1, max_length=4096)]
 
 
 # ---------------------------------------------------------------------------------- world
-class RandomMaze(_Strict):
-    rows: int = Field(8, ge=1, le=500, description="rooms north-south")
-    cols: int = Field(8, ge=1, le=500, description="rooms west-east")
+class RandomMaze(StrictConfig):
+    rows: int = Field(default=8, ge=1, le=500, description="rooms north-south")
+    cols: int = Field(default=8, ge=1, le=500, description="rooms west-east")
     seed: Seed = 0
-    corridor_cells: int = Field(2, ge=1, le=50)
-    wall_cells: int = Field(1, ge=1, le=50)
-    loop_fraction: float = Field(0.0, ge=0.0, le=1.0)
+    corridor_cells: int = Field(default=2, ge=1, le=50)
+    wall_cells: int = Field(default=1, ge=1, le=50)
+    loop_fraction: float = Field(default=0.0, ge=0.0, le=1.0)
 
 
-class BoxObstacle(_Strict):
+class BoxObstacle(StrictConfig):
     x_m: float
     y_m: float
     theta_deg: float = 0.0
@@ -78,13 +82,13 @@ Byte = Annotated[int, Field(ge=0, le=255)]
 RGBConfig = tuple[Byte, Byte, Byte]
 
 
-class PaintConfig(_Strict):
+class PaintConfig(StrictConfig):
     rows: tuple[Cell, Cell] = Field(description="first and last row (inclusive), row 0 = north")
     cols: tuple[Cell, Cell] = Field(description="first and last column (inclusive)")
     rgb: RGBConfig
 
 
-class ColorsConfig(_Strict):
+class ColorsConfig(StrictConfig):
     """What the onboard camera sees: colours 0..255 and painted wall cells."""
 
     wall_rgb: RGBConfig = (175, 175, 185)
@@ -96,15 +100,19 @@ class ColorsConfig(_Strict):
     paint: list[PaintConfig] = []
 
 
-class _MarkerCommon(_Strict):
+class _MarkerCommon(StrictConfig):
     face: Literal["north", "east", "south", "west"]
-    cell: tuple[Cell, Cell] | None = Field(None, description="[row, col] of the wall cell")
+    cell: tuple[Cell, Cell] | None = Field(default=None, description="[row, col] of the wall cell")
     x_m: float | None = None
     y_m: float | None = None
-    offset_m: float = Field(0.0, description="along the face, to the right seen from the front")
-    size_m: float = Field(0.4, gt=0, le=100, description="side of the code, quiet zone excluded")
+    offset_m: float = Field(
+        default=0.0, description="along the face, to the right seen from the front"
+    )
+    size_m: float = Field(
+        default=0.4, gt=0, le=100, description="side of the code, quiet zone excluded"
+    )
     center_z_m: float | None = Field(
-        None, ge=0, description="height of the centre; default: half the wall"
+        default=None, ge=0, description="height of the centre; default: half the wall"
     )
     name: Name | None = None
 
@@ -149,20 +157,20 @@ MarkerConfig = Annotated[
 ]
 
 
-class WorldConfig(_Strict):
+class WorldConfig(StrictConfig):
     maze: Literal["thesis_fig16", "thesis_c1"] | None = None
     matrix: list[list[int]] | None = None
     picture: str | None = Field(
-        None, max_length=64 * 1024 * 1024, description="text picture: '#' wall, '.' free"
+        default=None, max_length=64 * 1024 * 1024, description="text picture: '#' wall, '.' free"
     )
-    file: PathText | None = Field(None, description=".txt .csv .png .pgm or ROS map .yaml")
+    file: PathText | None = Field(default=None, description=".txt .csv .png .pgm or ROS map .yaml")
     random: RandomMaze | None = None
-    cell_size_m: float = Field(1.0, gt=0, le=100)
+    cell_size_m: float = Field(default=1.0, gt=0, le=100)
     origin_xy_m: tuple[float, float] | None = None
     boxes: list[BoxObstacle] = []
     colors: ColorsConfig = ColorsConfig()
     markers: list[MarkerConfig] = []
-    floor: FloorConfig | None = Field(None, description="friction for robots with dynamics")
+    floor: FloorConfig | None = Field(default=None, description="friction for robots with dynamics")
 
     @model_validator(mode="after")
     def _one_source(self) -> WorldConfig:
@@ -176,24 +184,26 @@ class WorldConfig(_Strict):
 
 
 # ---------------------------------------------------------------------------------- robots
-class Pose(_Strict):
+class Pose(StrictConfig):
     x_m: float = 0.0
     y_m: float = 0.0
-    theta_deg: float = 0.0
+    theta_deg: float = Field(default=0.0, title="heading")
 
 
-class Body(_Strict):
-    length_m: float = Field(0.6, gt=0, le=20)
-    width_m: float = Field(0.45, gt=0, le=20)
-    offset_x_m: float | None = Field(None, description="footprint centre ahead of P")
+class Body(StrictConfig):
+    length_m: float = Field(default=0.6, gt=0, le=20)
+    width_m: float = Field(default=0.45, gt=0, le=20)
+    offset_x_m: float | None = Field(default=None, description="footprint centre ahead of P")
 
 
-class SensorCommon(_Strict):
+class SensorCommon(StrictConfig):
     name: Name | None = None
-    rate_hz: float | None = Field(None, gt=0, le=10000)
-    range_min_m: float = Field(0.0, ge=0)
-    noise_std_m: float = Field(0.0, ge=0)
-    dropout_prob: float = Field(0.0, ge=0, le=1)
+    rate_hz: float | None = Field(
+        default=None, gt=0, le=10000, description="default: every step (rangers), 10 Hz (lidar)"
+    )
+    range_min_m: float = Field(default=0.0, ge=0)
+    noise_std_m: float = Field(default=0.0, ge=0)
+    dropout_prob: float = Field(default=0.0, ge=0, le=1)
     mount_x_m: float | None = None
     mount_y_m: float = 0.0
     mount_yaw_deg: float = 0.0
@@ -201,155 +211,118 @@ class SensorCommon(_Strict):
 
 class RangersConfig(SensorCommon):
     type: Literal["rangers"]
-    range_max_m: float = Field(1.0, gt=0, le=1000)
+    range_max_m: float = Field(default=1.0, gt=0, le=1000, title="range")
 
 
 class LidarConfig(SensorCommon):
     type: Literal["lidar"]
-    beams: int = Field(240, ge=1, le=100000)
-    fov_deg: float = Field(360.0, gt=0, le=360)
+    beams: int = Field(default=240, ge=1, le=100000)
+    fov_deg: float = Field(default=360.0, gt=0, le=360, title="field of view")
     angle_min_deg: float | None = None
-    range_max_m: float = Field(10.0, gt=0, le=1000)
+    range_max_m: float = Field(default=10.0, gt=0, le=1000, title="range")
 
 
-class CameraConfig(_Strict):
+class CameraConfig(StrictConfig):
     """The onboard camera: RGB and depth images (agvsim.sensors.camera)."""
 
     type: Literal["camera"]
     name: Name | None = None
-    width_px: int = Field(320, ge=8, le=4096)
-    height_px: int = Field(240, ge=8, le=4096)
-    hfov_deg: float = Field(60.0, gt=0, lt=170)
-    rate_hz: float = Field(10.0, gt=0, le=1000)
-    range_max_m: float = Field(30.0, gt=0, le=1000)
-    mount_x_m: float | None = Field(None, description="default: the front of the body")
+    width_px: int = Field(default=320, ge=8, le=4096)
+    height_px: int = Field(default=240, ge=8, le=4096)
+    hfov_deg: float = Field(default=60.0, gt=0, lt=170, title="field of view")
+    rate_hz: float = Field(default=10.0, gt=0, le=1000)
+    range_max_m: float = Field(default=30.0, gt=0, le=1000, title="range")
+    mount_x_m: float | None = Field(default=None, description="default: the front of the body")
     mount_y_m: float = 0.0
-    mount_z_m: float | None = Field(None, gt=0, description="default: 5 cm above the body")
+    mount_z_m: float | None = Field(
+        default=None, gt=0, title="mount height", description="default: 5 cm above the body"
+    )
     mount_yaw_deg: float = 0.0
-    pitch_deg: float = Field(0.0, ge=-80, le=80, description="positive: looking down")
+    pitch_deg: float = Field(
+        default=0.0, ge=-80, le=80, title="pitch down", description="positive: looking down"
+    )
     noise_std: float = Field(
-        0.0, ge=0, le=255, description="Gaussian pixel noise, std in 0..255 levels; 0 = off"
+        default=0.0,
+        ge=0,
+        le=255,
+        title="noise std (0..255)",
+        description="Gaussian pixel noise, std in 0..255 levels; 0 = off",
     )
 
 
 SensorConfig = Annotated[RangersConfig | LidarConfig | CameraConfig, Field(discriminator="type")]
 
 
-class OdometryConfig(_Strict):
-    wheel_noise_rel: float = Field(0.01, ge=0, le=1)
-    wheel_noise_abs_rad_s: float = Field(0.0, ge=0)
-    steering_noise_deg: float = Field(0.0, ge=0)
+class OdometryConfig(StrictConfig):
+    wheel_noise_rel: float = Field(default=0.01, ge=0, le=1)
+    wheel_noise_abs_rad_s: float = Field(default=0.0, ge=0)
+    steering_noise_deg: float = Field(default=0.0, ge=0)
 
 
-class ScriptStepConfig(_Strict):
-    duration_s: float = Field(gt=0)
-    twist: list[float] | None = Field(None, description="[vx, omega] or [vx, vy, omega]")
-    wheels: list[float] | None = Field(None, description="driven wheel speeds, rad/s")
-    steering_deg: float = 0.0
-
-    @model_validator(mode="after")
-    def _one_kind(self) -> ScriptStepConfig:
-        if (self.twist is None) == (self.wheels is None):
-            raise ValueError("each script step needs exactly one of 'twist' or 'wheels'")
-        if self.twist is not None and len(self.twist) not in (2, 3):
-            raise ValueError(f"twist must be [vx, omega] or [vx, vy, omega], got {self.twist}")
-        return self
+if TYPE_CHECKING:
+    ControllerConfig: TypeAlias = ControllerConfigBase
+else:  # every controller type of the registry (agvsim.behaviours.BEHAVIOURS), on "type"
+    ControllerConfig = Annotated[
+        Union[tuple(b.config for b in BEHAVIOURS.values())],  # noqa: UP007
+        Field(discriminator="type"),
+    ]
 
 
-class ScriptConfig(_Strict):
-    type: Literal["script"]
-    steps: list[ScriptStepConfig] = Field(min_length=1)
-    loop: bool = False
-
-
-class AvoidConfig(_Strict):
-    type: Literal["avoid"]
-    sensor: str = "rangers"
-    trigger_m: float = Field(0.8, gt=0)
-    speed_m_s: float = Field(0.5, gt=0)
-    turn_rate_rad_s: float = Field(1.0, gt=0)
-    heading_source: Literal["true_pose", "odometry"] = "true_pose"
-    side_clearance_m: float | None = Field(
-        None, gt=0, description="kept off side walls while driving; default 0.8 x trigger_m"
-    )
-
-
-class PythonControllerConfig(_Strict):
-    type: Literal["python"]
-    file: PathText = Field(description="a .py file next to the scenario (or an absolute path)")
-    name: str = Field(
-        "controller", min_length=1, max_length=200, description="function or class in the file"
-    )
-
-
-class IdleConfig(_Strict):
-    type: Literal["idle"]
-
-
-# Behaviours that bring their own config and builder (agvsim.behaviours.BEHAVIOURS) join the
-# built-in controller types here
-ControllerConfig = Annotated[
-    Union[(ScriptConfig, AvoidConfig, PythonControllerConfig, IdleConfig, *BEHAVIOURS)],  # noqa: UP007
-    Field(discriminator="type"),
-]
-
-
-class MetricsConfig(_Strict):
+class MetricsConfig(StrictConfig):
     capture: CaptureConfig | None = None
     reach: ReachConfig | None = None
     coverage: CoverageConfig | None = None
 
 
-class SlamBlock(_Strict):
+class SlamBlock(StrictConfig):
     """Online graph SLAM on one of the robot's lidars and its wheel odometry (agvsim.slam)."""
 
-    sensor: Name = Field("lidar", description="the lidar (range fan) whose scans SLAM reads")
-    resolution_m: float = Field(0.05, gt=0.005, le=1.0, description="map cell size (20 cells/m)")
+    sensor: Name = Field(
+        default="lidar", description="the lidar (range fan) whose scans SLAM reads"
+    )
+    resolution_m: float = Field(
+        default=0.05, gt=0.005, le=1.0, description="map cell size (20 cells/m)"
+    )
     max_range_m: float | None = Field(
-        None, gt=0, description="readings used up to this range; default: the sensor's maximum"
+        default=None,
+        gt=0,
+        description="readings used up to this range; default: the sensor's maximum",
     )
     loop_min_score: float = Field(
-        0.55, gt=0, lt=1, description="loop-closure acceptance threshold (mean match likelihood)"
+        default=0.55,
+        gt=0,
+        lt=1,
+        description="loop-closure acceptance threshold (mean match likelihood)",
     )
-    loop_search_radius_m: float = Field(3.0, gt=0, le=1000, description="loop-closure radius")
+    loop_search_radius_m: float = Field(
+        default=3.0, gt=0, le=1000, description="loop-closure radius"
+    )
     map_period_s: float = Field(
-        1.0, gt=0, description="how often the live map is redrawn (browser app overlay)"
+        default=1.0, gt=0, description="how often the live map is redrawn (browser app overlay)"
     )
 
 
-class RobotConfig(_Strict):
+class _RobotBase(StrictConfig):
+    """The keys of every robot entry. ``model`` and its typed ``params`` come with the model's
+    own class (``ROBOT_CONFIGS``), generated from the kinematic dataclass."""
+
     name: Name
-    model: Literal["differential", "tricycle", "ackermann", "mecanum", "omni3"]
+    model: str
     mode: ControlMode = ControlMode.INVERSE
-    params: dict[Name, Any] = Field({}, description="model parameters, see `agvsim models`")
+    params: Any = Field(default=None, description="model parameters, see `agvsim models`")
     body: Body = Body()
     pose: Pose = Pose()
-    color: str = Field("#d62728", max_length=64)
+    color: str = Field(default="#d62728", max_length=64)
     sensors: list[SensorConfig] = []
     odometry: OdometryConfig = OdometryConfig()
     controller: ControllerConfig = IdleConfig(type="idle")
     knows: list[Name] = Field(
-        [], description="robots whose true pose this robot's controller sees (obs.others)"
+        default=[], description="robots whose true pose this robot's controller sees (obs.others)"
     )
     slam: SlamBlock | None = None
     dynamics: DynamicsConfig | None = Field(
-        None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
+        default=None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
     )
-
-    @field_validator("params")
-    @classmethod
-    def _numbers_or_text(cls, params: dict[str, Any]) -> dict[str, Any]:
-        for key, value in params.items():
-            number = isinstance(value, int | float) and not isinstance(value, bool)
-            if isinstance(value, float) and not math.isfinite(value):
-                raise ValueError(f"{key}: must be a finite number (NaN and inf are not allowed)")
-            if number and abs(value) > MAX_MAGNITUDE:  # an int of 400 digits: no float holds it
-                raise ValueError(f"{key}: too large (allowed: magnitude <= {MAX_MAGNITUDE:g})")
-            if not (number or (isinstance(value, str) and len(value) <= 200)):
-                raise ValueError(
-                    f"{key}: must be a number or a short text, got {short_repr(value)}"
-                )
-        return params
 
     @field_validator("color")
     @classmethod
@@ -366,37 +339,93 @@ class RobotConfig(_Strict):
         return value
 
 
-class LimitsConfig(_Strict):
+# One robot config class a kinematic model (kinematics.MODELS), its params typed from the
+# model's dataclass (agvsim.scenario_params)
+def _robot_config(kind: str, params: type[StrictConfig]) -> type[_RobotBase]:
+    tag: Any = Literal[kind]
+    return create_model(
+        f"{MODELS[kind].__name__}Robot",
+        __base__=_RobotBase,
+        model=(tag, ...),
+        params=(params, Field(default=params(), description=f"{kind} parameters")),
+    )
+
+
+ROBOT_CONFIGS = {kind: _robot_config(kind, params) for kind, params in PARAMS.items()}
+
+# A robot whose model is missing or unknown: its fields are still checked, so that one
+# refusal lists every fault ("model: required", "unknown key 'modle'", ...)
+_ANY_MODEL: Any = Literal[tuple(MODELS)]
+_UnknownModelRobot = create_model(
+    "UnknownModelRobot",
+    __base__=_RobotBase,
+    model=(_ANY_MODEL, ...),
+    params=(dict[Name, Any], {}),
+)
+UNKNOWN_MODEL = "?"  # its tag
+
+
+def _model_tag(entry: Any) -> str:
+    model = entry.get("model") if isinstance(entry, dict) else getattr(entry, "model", None)
+    return model if isinstance(model, str) and model in MODELS else UNKNOWN_MODEL
+
+
+if TYPE_CHECKING:
+    RobotConfig: TypeAlias = _RobotBase
+else:  # a union discriminated by ``model``
+    RobotConfig = Annotated[
+        Union[  # noqa: UP007
+            tuple(Annotated[cls, Tag(kind)] for kind, cls in ROBOT_CONFIGS.items())
+            + (Annotated[_UnknownModelRobot, Tag(UNKNOWN_MODEL)],)
+        ],
+        Discriminator(_model_tag),
+    ]
+_ROBOT = TypeAdapter(RobotConfig)
+
+
+def parse_robot(entry: dict[str, Any]) -> RobotConfig:
+    """One robot entry of a scenario, validated (pydantic's ValidationError when invalid)."""
+    return _ROBOT.validate_python(entry)
+
+
+class LimitsConfig(StrictConfig):
     """The scenario raising (or lowering) its own run limits; see agvsim.scenario_limits."""
 
-    max_steps: int | None = Field(None, ge=1, le=10**15, description="duration_s / dt_s")
-    max_robots: int | None = Field(None, ge=1, le=10**9, description="robots in the scenario")
-    max_grid_cells: int | None = Field(None, ge=1, le=10**12, description="map rows x cols")
+    max_steps: int | None = Field(default=None, ge=1, le=10**15, description="duration_s / dt_s")
+    max_robots: int | None = Field(
+        default=None, ge=1, le=10**9, description="robots in the scenario"
+    )
+    max_grid_cells: int | None = Field(default=None, ge=1, le=10**12, description="map rows x cols")
     max_camera_pixels_per_s: float | None = Field(
-        None, gt=0, description="width x height x rate, all cameras"
+        default=None, gt=0, description="width x height x rate, all cameras"
     )
     max_lidar_rays_per_s: float | None = Field(
-        None, gt=0, description="beams x rate, all range sensors"
+        default=None, gt=0, description="beams x rate, all range sensors"
     )
 
 
-class Scenario(_Strict):
-    name: str = Field("unnamed scenario", max_length=200)
-    description: str = Field("", max_length=20_000)
+class Scenario(StrictConfig):
+    name: str = Field(default="unnamed scenario", max_length=200)
+    description: str = Field(default="", max_length=20_000)
     seed: Seed = 0
-    duration_s: float = Field(60.0, gt=0, le=1e7)
-    dt_s: float = Field(0.02, gt=0, le=1.0)
+    duration_s: float = Field(default=60.0, gt=0, le=1e7)
+    dt_s: float = Field(default=0.02, gt=0, le=1.0)
     world: WorldConfig
     robots: list[RobotConfig] = Field(min_length=1)
     metrics: MetricsConfig = MetricsConfig()
     on_controller_error: Literal["stop_run", "stop_robot"] = Field(
-        "stop_run", description="a failing controller ends the run, or only stops its robot"
+        default="stop_run", description="a failing controller ends the run, or only stops its robot"
     )
-    limits: LimitsConfig | None = Field(None, description="raise the run's resource limits")
-    layout: LayoutConfig | None = Field(None, description="a track layout (LIF), docs/fleet.md")
-    vda5050: Vda5050Config | None = Field(None, description="VDA 5050 vehicles, docs/fleet.md")
+    limits: LimitsConfig | None = Field(default=None, description="raise the run's resource limits")
+    layout: LayoutConfig | None = Field(
+        default=None, description="a track layout (LIF), docs/fleet.md"
+    )
+    vda5050: Vda5050Config | None = Field(
+        default=None, description="VDA 5050 vehicles, docs/fleet.md"
+    )
     master: MasterConfig | None = Field(
-        None, description="transport orders, charging, breakdowns for the master, docs/master.md"
+        default=None,
+        description="transport orders, charging, breakdowns for the master, docs/master.md",
     )
     _base_dir: Path = PrivateAttr(default=Path("."))
     _source: str = PrivateAttr(default="scenario")
@@ -411,7 +440,7 @@ class Scenario(_Strict):
             shown = dup[:20] + ([f"... {len(dup) - 20} more"] if len(dup) > 20 else [])
             raise ValueError(f"robot names must be unique; repeated: {shown}")
         m = self.metrics
-        named = [("capture.pursuer", m.capture and m.capture.pursuer)]
+        named: list[tuple[str, Any]] = [("capture.pursuer", m.capture and m.capture.pursuer)]
         named += [("capture.evader", m.capture and m.capture.evader)]
         named += [("reach.robot", m.reach and m.reach.robot)]
         named += [("coverage.robot", m.coverage and m.coverage.robot)]
@@ -419,14 +448,14 @@ class Scenario(_Strict):
             if name and name not in counts:
                 raise ValueError(
                     f"metrics.{field}: {short_repr(name)} is not a robot"
-                    + _did_you_mean(name, list(counts)[:50])
+                    + did_you_mean(name, list(counts)[:50])
                 )
         for k, r in enumerate(self.robots):
             for other in r.knows:
                 if other not in counts or other == r.name:
                     raise ValueError(
                         f"robots[{k}].knows: {other!r} is not another robot"
-                        + _did_you_mean(other, [n for n in names if n != r.name])
+                        + did_you_mean(other, [n for n in names if n != r.name])
                     )
         return self
 
@@ -459,7 +488,8 @@ def _models_in(ann: Any) -> list[type[BaseModel]]:
 
 
 def _tag_of(model: type[BaseModel]) -> str | None:
-    f = model.model_fields.get("type") or model.model_fields.get("kind")
+    fields = model.model_fields
+    f = fields.get("type") or fields.get("kind") or fields.get("model")
     args = getattr(f.annotation, "__args__", ()) if f is not None else ()
     return str(args[0]) if args else None
 
@@ -486,12 +516,6 @@ def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
     return names
 
 
-def _did_you_mean(word: str, options: list[str]) -> str:
-    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    return f"{hint} (allowed: {', '.join(sorted(options))})"
-
-
 MAX_PROBLEMS = 30  # listed in one refusal; the rest are counted
 
 
@@ -504,17 +528,31 @@ def short_repr(value: Any, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 12] + f"... ({len(text):,} chars)"
 
 
+def _untagged(loc: tuple) -> tuple:
+    """``loc`` without the model tag pydantic puts after a robot's index: the file has no
+    such level (``robots[0].params.x``, not ``robots[0].differential.params.x``)."""
+    if len(loc) > 2 and loc[0] == "robots" and (loc[2] in MODELS or loc[2] == UNKNOWN_MODEL):
+        return loc[:2] + loc[3:]
+    return loc
+
+
 def _format_errors(err: ValidationError) -> list[str]:
     out = []
     errors = err.errors()
     for e in errors[:MAX_PROBLEMS]:
         loc = tuple(e["loc"])
-        where = _loc(loc)
-        if e["type"] == "extra_forbidden":
+        where = _loc(_untagged(loc))
+        if e["type"] == "extra_forbidden" and loc[-2:-1] == ("params",) and loc[0] == "robots":
+            key, kind = str(loc[-1]), str(loc[2])
+            out.append(
+                f"{_loc(_untagged(loc[:-1]))}: unknown parameter {short_repr(key)} for model "
+                f"{kind!r}" + did_you_mean(key, list(PARAMS[kind].model_fields))
+            )
+        elif e["type"] == "extra_forbidden":
             key = str(loc[-1])
             out.append(
                 f"{where}: unknown key {short_repr(key)}"
-                + _did_you_mean(key, _fields_at(Scenario, loc))
+                + did_you_mean(key, _fields_at(Scenario, loc))
             )
         elif e["type"] == "literal_error" and isinstance(e.get("input"), str):
             opts = re.findall(r"'([^']*)'", str(e.get("ctx", {}).get("expected", "")))
@@ -529,7 +567,7 @@ def _format_errors(err: ValidationError) -> list[str]:
             tag = ctx.get("tag", "?")
             expected = ctx.get("expected_tags", "")
             opts = [t.strip(" '") for t in str(expected).split(",")]
-            out.append(f"{where}: unknown type {short_repr(tag)}" + _did_you_mean(str(tag), opts))
+            out.append(f"{where}: unknown type {short_repr(tag)}" + did_you_mean(str(tag), opts))
         else:
             msg = e["msg"].removeprefix("Value error, ")
             if e["type"] == "finite_number":

@@ -12,16 +12,25 @@ from __future__ import annotations
 import copy
 import typing
 from dataclasses import dataclass
-from dataclasses import fields as dc_fields
 from typing import Any, Literal
 
 import yaml
+from pydantic import BaseModel
 
+from agvsim.behaviours import BEHAVIOURS
 from agvsim.kinematics import MODELS
 from agvsim.safe_yaml import YamlInputError, load_yaml
-from agvsim.scenario import default_camera_height
+from agvsim.scenario import default_camera_height, default_rate_hz
 from agvsim.scenario_dynamics import DynamicsConfig
-from agvsim.scenario_schema import ControllerConfig
+from agvsim.scenario_params import PARAMS
+from agvsim.scenario_schema import (
+    Body,
+    CameraConfig,
+    LidarConfig,
+    Pose,
+    RangersConfig,
+    Scenario,
+)
 
 Kind = Literal["text", "number", "int", "dropdown", "checkbox", "yaml"]
 
@@ -39,39 +48,20 @@ class Field:
 
 def controller_types(allow_python: bool = False) -> list[str]:
     """Every controller ``type`` a scenario accepts (python only when allowed)."""
-    union = typing.get_args(typing.get_args(ControllerConfig)[0])
-    out = []
-    for cls in union:
-        (tag,) = typing.get_args(cls.model_fields["type"].annotation)
-        if tag != "python" or allow_python:
-            out.append(tag)
-    return out
+    return [tag for tag in BEHAVIOURS if tag != "python" or allow_python]
 
 
-SENSOR_FIELDS = {
-    "rangers": [
-        ("range_max_m", "range (m)", "number", 1.0),
-        ("rate_hz", "rate (Hz)", "number", 50.0),
-        ("noise_std_m", "noise std (m)", "number", 0.0),
-    ],
-    "lidar": [
-        ("beams", "beams", "int", 240),
-        ("fov_deg", "field of view (deg)", "number", 360.0),
-        ("range_max_m", "range (m)", "number", 10.0),
-        ("rate_hz", "rate (Hz)", "number", 10.0),
-        ("noise_std_m", "noise std (m)", "number", 0.0),
-    ],
-    "camera": [
-        ("width_px", "width (px)", "int", 320),
-        ("height_px", "height (px)", "int", 240),
-        ("hfov_deg", "field of view (deg)", "number", 60.0),
-        ("rate_hz", "rate (Hz)", "number", 10.0),
-        ("range_max_m", "range (m)", "number", 30.0),
-        ("mount_z_m", "mount height (m)", "number", None),  # None: see _default
-        ("pitch_deg", "pitch down (deg)", "number", 0.0),
-        ("noise_std", "noise std (0..255)", "number", 0.0),
-    ],
-}
+# which keys of each sensor the panel shows; defaults and labels come from the schema
+SENSOR_FIELDS: dict[str, tuple[type[BaseModel], tuple[str, ...]]] = {
+    "rangers": (RangersConfig, ("range_max_m", "rate_hz", "noise_std_m")),
+    "lidar": (LidarConfig, ("beams", "fov_deg", "range_max_m", "rate_hz", "noise_std_m")),
+    "camera": (
+        CameraConfig,
+        ("width_px", "height_px", "hfov_deg", "rate_hz", "range_max_m", "mount_z_m", "pitch_deg",
+         "noise_std"),
+    ),
+}  # fmt: skip
+DEFAULT_DT_S = float(Scenario.model_fields["dt_s"].default)  # a scenario without dt_s
 
 
 # the dynamics block's main values (agvsim.dynamics); the rest stays as the file has it
@@ -104,13 +94,29 @@ UNITS = (("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_rad", "rad"), ("_deg", "deg"),
          ("_px", "px"), ("_m", "m"), ("_s", "s"))  # fmt: skip
 
 
+def _unit(name: str) -> tuple[str, str]:
+    """``wheel_radius_m`` -> (``wheel_radius``, ``m``); no unit suffix: (name, "")."""
+    for suffix, unit in UNITS:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)], unit
+    return name, ""
+
+
 def plain_label(name: str) -> str:
     """A parameter's name as the panel shows it: ``wheel_radius_m`` -> ``wheel radius (m)``,
     ``max_steer_rate_rad_s`` -> ``max steer rate (rad/s)``."""
-    for suffix, unit in UNITS:
-        if name.endswith(suffix) and len(name) > len(suffix):
-            return f"{name[: -len(suffix)].replace('_', ' ')} ({unit})"
-    return name.replace("_", " ")
+    stem, unit = _unit(name)
+    return f"{stem.replace('_', ' ')} ({unit})" if unit else stem.replace("_", " ")
+
+
+def schema_label(config: type[BaseModel], name: str) -> str:
+    """The label of a schema field: its ``title`` (with the unit its name carries), or its
+    name in plain words."""
+    title = config.model_fields[name].title
+    if not title:
+        return plain_label(name)
+    unit = _unit(name)[1]
+    return f"{title} ({unit})" if unit and "(" not in title else title
 
 
 def fields_in_error(problems: list[str], robot: dict) -> dict[str, str]:
@@ -142,16 +148,26 @@ def fields_in_error(problems: list[str], robot: dict) -> dict[str, str]:
     return out
 
 
-def _default(robot: dict, key: str, default: Any) -> Any:
-    """The value the panel shows for an unset sensor key: the schema's default, or for the
-    camera's height the one agvsim.scenario derives (5 cm above the body)."""
-    if key != "mount_z_m":
+def _sensor_default(robot: dict, kind: str, key: str, dt_s: float) -> Any:
+    """The value the panel shows for an unset sensor key: the schema's default, or the one
+    agvsim.scenario derives when the schema's is None (a range sensor's rate from ``dt_s``,
+    the camera's height 5 cm above the body)."""
+    default = SENSOR_FIELDS[kind][0].model_fields[key].default
+    if default is not None:
         return default
+    if key == "rate_hz":
+        return default_rate_hz(kind, dt_s)
+    if key != "mount_z_m":
+        return None
     model = robot.get("model", "differential")
     r = robot.get("params", {}).get("wheel_radius_m")
-    if r is None:
-        r = next((f.default for f in dc_fields(MODELS[model]) if f.name == "wheel_radius_m"), 0.1)
-    return round(default_camera_height(r), 9)
+    if r is None and model in PARAMS:
+        r = PARAMS[model].model_fields["wheel_radius_m"].default
+    return round(default_camera_height(r if r is not None else 0.1), 9)
+
+
+def _kind_of(config: type[BaseModel], key: str) -> Kind:
+    return "int" if config.model_fields[key].annotation is int else "number"
 
 
 def _sensor(robot: dict, kind: str) -> dict | None:
@@ -161,10 +177,11 @@ def _sensor(robot: dict, kind: str) -> dict | None:
     return None
 
 
-def mask_fields(robot: dict, allow_python: bool = False) -> list[Field]:
-    """The panel's fields for ``robot`` (a robot entry of a scenario, as a dict)."""
+def mask_fields(robot: dict, allow_python: bool = False, dt_s: float = DEFAULT_DT_S) -> list[Field]:
+    """The panel's fields for ``robot`` (a robot entry of a scenario, as a dict, in a scenario
+    stepping ``dt_s``)."""
     model = robot.get("model", "differential")
-    cls = MODELS[model]
+    params_config = PARAMS[model]
     params = robot.get("params", {})
     body = robot.get("body", {})
     pose = robot.get("pose", {})
@@ -180,33 +197,30 @@ def mask_fields(robot: dict, allow_python: bool = False) -> list[Field]:
             hint="inverse: the controller gives a body twist; forward: wheel speeds",
         ),
     ]
-    for f in dc_fields(cls):
-        v = params.get(f.name, f.default)
-        if isinstance(f.default, str):
-            opts = ("ackermann", "parallel") if f.name == "steering_geometry" else (str(v),)
-            out.append(Field(f"params.{f.name}", plain_label(f.name), "dropdown", v, opts))
+    for name, f in params_config.model_fields.items():
+        v = params.get(name, f.default)
+        label, hint = schema_label(params_config, name), f.description or ""
+        choices = typing.get_args(f.annotation)
+        if typing.get_origin(f.annotation) is Literal:
+            opts = tuple(str(c) for c in choices)
+            out.append(Field(f"params.{name}", label, "dropdown", v, opts, hint=hint))
         else:
-            label = plain_label(f.name)
-            out.append(Field(f"params.{f.name}", label, "number", float(v), step=0.01))
-    out += [
-        Field("body.length_m", "body length (m)", "number", body.get("length_m", 0.6)),
-        Field("body.width_m", "body width (m)", "number", body.get("width_m", 0.45)),
-        Field("pose.x_m", "initial x (m)", "number", pose.get("x_m", 0.0), step=0.1),
-        Field("pose.y_m", "initial y (m)", "number", pose.get("y_m", 0.0), step=0.1),
-        Field(
-            "pose.theta_deg",
-            "initial heading (deg)",
-            "number",
-            pose.get("theta_deg", 0.0),
-            step=1.0,
-        ),
-    ]
-    for kind, items in SENSOR_FIELDS.items():
+            out.append(Field(f"params.{name}", label, "number", float(v), step=0.01, hint=hint))
+    for key in ("length_m", "width_m"):
+        v = body.get(key, Body.model_fields[key].default)
+        out.append(Field(f"body.{key}", f"body {schema_label(Body, key)}", "number", v))
+    for key, step in (("x_m", 0.1), ("y_m", 0.1), ("theta_deg", 1.0)):
+        v = pose.get(key, Pose.model_fields[key].default)
+        label = f"initial {schema_label(Pose, key)}"
+        out.append(Field(f"pose.{key}", label, "number", v, step=step))
+    for kind, (config, keys) in SENSOR_FIELDS.items():
         s = _sensor(robot, kind)
         out.append(Field(f"sensors.{kind}", f"{kind} on", "checkbox", s is not None))
-        for key, label, fk, default in items:
-            v = _default(robot, key, default) if s is None or s.get(key) is None else s[key]
-            out.append(Field(f"sensors.{kind}.{key}", f"{kind} {label}", fk, v))
+        for key in keys:
+            unset = s is None or s.get(key) is None
+            v = _sensor_default(robot, kind, key, dt_s) if unset else s[key]  # type: ignore[index]
+            label = f"{kind} {schema_label(config, key)}"
+            out.append(Field(f"sensors.{kind}.{key}", label, _kind_of(config, key), v))
     dyn = robot.get("dynamics")
     out.append(
         Field(
@@ -248,8 +262,9 @@ class MaskError(ValueError):
     """A field the panel cannot even turn into a scenario entry (e.g. unreadable YAML)."""
 
 
-def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
-    """A copy of ``robot`` with the panel's ``values`` (field key -> value) written in."""
+def robot_from_mask(robot: dict, values: dict[str, Any], dt_s: float = DEFAULT_DT_S) -> dict:
+    """A copy of ``robot`` with the panel's ``values`` (field key -> value) written in (the
+    scenario steps ``dt_s``, as for :func:`mask_fields`)."""
     out = copy.deepcopy(robot)
     model_changed = "model" in values and values["model"] != robot.get("model")
     for key in ("name", "model", "mode"):
@@ -257,7 +272,7 @@ def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
             out[key] = values[key]
     if model_changed:  # the old model's parameters mean nothing to the new one
         out["params"] = {}
-    names = {f.name: f.default for f in dc_fields(MODELS[out["model"]])}
+    names = {n: f.default for n, f in PARAMS[out["model"]].model_fields.items()}
     params = dict(out.get("params", {}))
     for key, v in values.items():
         if key.startswith("params.") and not model_changed:
@@ -281,11 +296,12 @@ def robot_from_mask(robot: dict, values: dict[str, Any]) -> dict:
         if not on:
             continue
         s = dict(_sensor(robot, kind) or {"type": kind})
-        for key, _label, fk, default in SENSOR_FIELDS[kind]:
+        config, keys = SENSOR_FIELDS[kind]
+        for key in keys:
             v = values.get(f"sensors.{kind}.{key}")
             # keys the entry leaves unset stay unset while the panel shows their default
-            if v is not None and (key in s or v != _default(robot, key, default)):
-                s[key] = int(round(v)) if fk == "int" else v
+            if v is not None and (key in s or v != _sensor_default(robot, kind, key, dt_s)):
+                s[key] = int(round(v)) if _kind_of(config, key) == "int" else v
         sensors.append(s)
     out["sensors"] = sensors
     if "dynamics" in values:

@@ -367,7 +367,7 @@ class Panel:
         order = self._mask_anchor.order + 0.01
         with self._robot_tab, gui.add_folder("mask", order=order) as folder:
             self._mask_folder = folder
-            for f in mask_fields(robot, allow_python=self.session.allow_python):
+            for f in mask_fields(robot, self.session.allow_python, self.session.sim.dt_s):
                 self._mask_widgets[f.key] = self._widget(f)
                 self._mask_hints[f.key] = f.hint or None
             apply = gui.add_button("Apply", icon=viser.Icon.CHECK)
@@ -397,7 +397,7 @@ class Panel:
 
     def _model_changed(self) -> None:
         try:
-            draft = robot_from_mask(self._draft, self._values())
+            draft = robot_from_mask(self._draft, self._values(), self.session.sim.dt_s)
         except MaskError as err:
             self.mask_msg.content = _error_md(str(err))
             return
@@ -412,7 +412,7 @@ class Panel:
             self._apply_note = ""
             robot: dict = {}
             try:
-                robot = robot_from_mask(self._draft, self._values())
+                robot = robot_from_mask(self._draft, self._values(), self.session.sim.dt_s)
                 note = self.session.apply_robot(name, robot)
             except ScenarioError as err:
                 self._show_apply_error(err.problems, robot)

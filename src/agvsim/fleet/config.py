@@ -4,21 +4,22 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from agvsim.config_base import StrictConfig
 
 
-class _Strict(BaseModel):
-    # as every scenario block: NaN and inf refused, text bounded
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=4096)
-
-
-class LayoutConfig(_Strict):
+class LayoutConfig(StrictConfig):
     """A LIF file (path beside the scenario), or a layout derived from the world's grid."""
 
-    file: str | None = Field(None, description="LIF file (.json) next to the scenario")
-    layout_id: str | None = Field(None, description="which layout of the file (default: first)")
-    from_grid: bool = Field(False, description="derive nodes and edges from the free cells")
-    simplify: bool = Field(True, description="derived: nodes only at junctions, corners, ends")
+    file: str | None = Field(default=None, description="LIF file (.json) next to the scenario")
+    layout_id: str | None = Field(
+        default=None, description="which layout of the file (default: first)"
+    )
+    from_grid: bool = Field(default=False, description="derive nodes and edges from the free cells")
+    simplify: bool = Field(
+        default=True, description="derived: nodes only at junctions, corners, ends"
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> LayoutConfig:
@@ -27,26 +28,32 @@ class LayoutConfig(_Strict):
         return self
 
 
-class VehicleEntry(_Strict):
+class VehicleEntry(StrictConfig):
     robot: str = Field(description="name of the robot that is this vehicle")
     serial: str | None = Field(
-        None, pattern=r"^[A-Za-z0-9_.:-]+$", description="serialNumber (default: the robot's name)"
+        default=None,
+        pattern=r"^[A-Za-z0-9_.:-]+$",
+        description="serialNumber (default: the robot's name)",
     )
-    start_node: str | None = Field(None, description="layout node it starts parked on")
-    battery_pct: float = Field(80.0, ge=0, le=100)
+    start_node: str | None = Field(default=None, description="layout node it starts parked on")
+    battery_pct: float = Field(default=80.0, ge=0, le=100)
 
 
-class Vda5050Config(_Strict):
+class Vda5050Config(StrictConfig):
     version: Literal["2.1.0", "3.0.0"] = "2.1.0"
-    interface_name: str = Field("uagv", pattern=r"^[A-Za-z0-9_.:-]+$")
-    manufacturer: str = Field("agvsim", pattern=r"^[A-Za-z0-9_.:-]+$")
+    interface_name: str = Field(default="uagv", pattern=r"^[A-Za-z0-9_.:-]+$")
+    manufacturer: str = Field(default="agvsim", pattern=r"^[A-Za-z0-9_.:-]+$")
     map_id: str = "map"
-    safety_sensor: str = Field("lidar", description="the range fan the protective field reads")
-    max_speed_m_s: float = Field(1.0, gt=0, le=10)
-    state_period_s: float = Field(1.0, gt=0, le=30, description="state at least this often")
-    visualization_period_s: float = Field(1.0, ge=0, le=60, description="0: no visualization")
-    pick_time_s: float = Field(3.0, ge=0, le=3600)
-    drop_time_s: float = Field(3.0, ge=0, le=3600)
+    safety_sensor: str = Field(
+        default="lidar", description="the range fan the protective field reads"
+    )
+    max_speed_m_s: float = Field(default=1.0, gt=0, le=10)
+    state_period_s: float = Field(default=1.0, gt=0, le=30, description="state at least this often")
+    visualization_period_s: float = Field(
+        default=1.0, ge=0, le=60, description="0: no visualization"
+    )
+    pick_time_s: float = Field(default=3.0, ge=0, le=3600)
+    drop_time_s: float = Field(default=3.0, ge=0, le=3600)
     vehicles: list[VehicleEntry] = Field(min_length=1, max_length=100_000)
 
     @model_validator(mode="after")

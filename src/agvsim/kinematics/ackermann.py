@@ -19,18 +19,23 @@ from typing import ClassVar, Literal
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, check_positive, wheel_heading
+from agvsim.kinematics.base import WheelState, as_twists, wheel_heading
+from agvsim.kinematics.params import HALF_TURN, check_params, param
 
 
 @dataclass(frozen=True)
 class Ackermann:
-    wheel_radius_m: float | np.ndarray = 0.1
-    wheelbase_m: float | np.ndarray = 0.5
-    half_track_m: float | np.ndarray = 0.2
-    max_wheel_speed_rad_s: float | np.ndarray = 20.0
-    max_steer_rad: float | np.ndarray = np.deg2rad(35.0)
-    max_steer_rate_rad_s: float | np.ndarray = 2.0
-    steering_geometry: Literal["ackermann", "parallel"] = "ackermann"
+    wheel_radius_m: float | np.ndarray = param(0.1, doc="r: wheel radius")
+    wheelbase_m: float | np.ndarray = param(0.5, doc="L: rear axle centre to the front axle")
+    half_track_m: float | np.ndarray = param(0.2, doc="l: axle centre to each wheel")
+    max_wheel_speed_rad_s: float | np.ndarray = param(20.0, doc="every wheel's speed limit")
+    max_steer_rad: float | np.ndarray = param(
+        np.deg2rad(35.0), HALF_TURN, doc="steering angle limit"
+    )
+    max_steer_rate_rad_s: float | np.ndarray = param(2.0, doc="steering rate limit")
+    steering_geometry: Literal["ackermann", "parallel"] = param(
+        "ackermann", None, doc="ackermann: each front wheel its own angle; parallel: the thesis's"
+    )
 
     kind: ClassVar[str] = "ackermann"
     wheel_names: ClassVar[tuple[str, ...]] = (
@@ -45,24 +50,7 @@ class Ackermann:
     holonomic: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
-        check_positive(
-            self,
-            "wheel_radius_m",
-            "wheelbase_m",
-            "half_track_m",
-            "max_wheel_speed_rad_s",
-            "max_steer_rad",
-            "max_steer_rate_rad_s",
-        )
-        if self.steering_geometry not in ("ackermann", "parallel"):
-            raise ValueError(
-                f"Ackermann.steering_geometry must be 'ackermann' or 'parallel', "
-                f"got {self.steering_geometry!r}"
-            )
-        if np.any(np.asarray(self.max_steer_rad) >= np.pi / 2):
-            raise ValueError(
-                f"Ackermann.max_steer_rad must be below pi/2 rad (90 deg), got {self.max_steer_rad}"
-            )
+        check_params(self)
 
     def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray:
         """drive ``(N, 2)`` rear (left, right) rad/s, steering ``(N,)`` rad -> twist ``(N, 3)``."""

@@ -172,14 +172,3 @@ def as_twists(twist: np.ndarray) -> np.ndarray:
     if t.shape[-1] != 3:
         raise ValueError(f"a twist array must end in 3 values (vx, vy, omega), got shape {t.shape}")
     return t
-
-
-def check_positive(model: object, *names: str) -> None:
-    """Raise ValueError naming the parameter when a dimension is not positive and finite."""
-    for name in names:
-        v = np.asarray(getattr(model, name), dtype=np.float64)
-        if not np.all(np.isfinite(v)) or np.any(v <= 0):
-            raise ValueError(
-                f"{type(model).__name__}.{name} must be a positive number of metres or rad/s, "
-                f"got {getattr(model, name)!r}"
-            )

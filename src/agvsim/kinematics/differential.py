@@ -13,14 +13,15 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, check_positive
+from agvsim.kinematics.base import WheelState, as_twists
+from agvsim.kinematics.params import check_params, param
 
 
 @dataclass(frozen=True)
 class DifferentialDrive:
-    wheel_radius_m: float | np.ndarray = 0.1
-    half_track_m: float | np.ndarray = 0.25
-    max_wheel_speed_rad_s: float | np.ndarray = 20.0
+    wheel_radius_m: float | np.ndarray = param(0.1, doc="r: wheel radius")
+    half_track_m: float | np.ndarray = param(0.25, doc="l: axle centre to each wheel")
+    max_wheel_speed_rad_s: float | np.ndarray = param(20.0, doc="every wheel's speed limit")
 
     kind: ClassVar[str] = "differential"
     wheel_names: ClassVar[tuple[str, ...]] = ("left", "right")
@@ -30,7 +31,7 @@ class DifferentialDrive:
     holonomic: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
-        check_positive(self, "wheel_radius_m", "half_track_m", "max_wheel_speed_rad_s")
+        check_params(self)
 
     def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray:
         """drive ``(N, 2)`` = (phi_left, phi_right) rad/s -> twist ``(N, 3)``."""

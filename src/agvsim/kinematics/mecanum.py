@@ -16,15 +16,18 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, check_positive
+from agvsim.kinematics.base import WheelState, as_twists
+from agvsim.kinematics.params import check_params, param
 
 
 @dataclass(frozen=True)
 class Mecanum:
-    wheel_radius_m: float | np.ndarray = 0.05
-    half_length_m: float | np.ndarray = 0.2  # lx: centre to front/rear axle
-    half_width_m: float | np.ndarray = 0.2  # ly: centre to left/right wheel plane
-    max_wheel_speed_rad_s: float | np.ndarray = 30.0
+    wheel_radius_m: float | np.ndarray = param(0.05, doc="r: wheel radius")
+    half_length_m: float | np.ndarray = param(0.2, doc="lx: centre to the front and rear axles")
+    half_width_m: float | np.ndarray = param(
+        0.2, doc="ly: centre to the left and right wheel planes"
+    )
+    max_wheel_speed_rad_s: float | np.ndarray = param(30.0, doc="every wheel's speed limit")
 
     kind: ClassVar[str] = "mecanum"
     wheel_names: ClassVar[tuple[str, ...]] = (
@@ -39,9 +42,7 @@ class Mecanum:
     holonomic: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        check_positive(
-            self, "wheel_radius_m", "half_length_m", "half_width_m", "max_wheel_speed_rad_s"
-        )
+        check_params(self)
 
     def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray:
         r = self.wheel_radius_m

@@ -15,7 +15,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, check_positive
+from agvsim.kinematics.base import WheelState, as_twists
+from agvsim.kinematics.params import check_params, param
 
 _A = np.deg2rad([0.0, 120.0, 240.0])
 _S, _C = np.sin(_A), np.cos(_A)
@@ -23,9 +24,9 @@ _S, _C = np.sin(_A), np.cos(_A)
 
 @dataclass(frozen=True)
 class Omni3:
-    wheel_radius_m: float | np.ndarray = 0.05
-    base_radius_m: float | np.ndarray = 0.2
-    max_wheel_speed_rad_s: float | np.ndarray = 30.0
+    wheel_radius_m: float | np.ndarray = param(0.05, doc="r: wheel radius")
+    base_radius_m: float | np.ndarray = param(0.2, doc="R: centre to each wheel")
+    max_wheel_speed_rad_s: float | np.ndarray = param(30.0, doc="every wheel's speed limit")
 
     kind: ClassVar[str] = "omni3"
     wheel_names: ClassVar[tuple[str, ...]] = ("front", "rear_left", "rear_right")
@@ -35,7 +36,7 @@ class Omni3:
     holonomic: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        check_positive(self, "wheel_radius_m", "base_radius_m", "max_wheel_speed_rad_s")
+        check_params(self)
 
     def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray:
         r, R = self.wheel_radius_m, self.base_radius_m

@@ -18,17 +18,18 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, check_positive, wheel_heading
+from agvsim.kinematics.base import WheelState, as_twists, wheel_heading
+from agvsim.kinematics.params import check_params, param
 
 
 @dataclass(frozen=True)
 class Tricycle:
-    wheel_radius_m: float | np.ndarray = 0.1
-    wheelbase_m: float | np.ndarray = 0.5
-    half_track_m: float | np.ndarray = 0.2
-    max_wheel_speed_rad_s: float | np.ndarray = 20.0
-    max_steer_rad: float | np.ndarray = np.pi / 2
-    max_steer_rate_rad_s: float | np.ndarray = 3.0
+    wheel_radius_m: float | np.ndarray = param(0.1, doc="r: wheel radius")
+    wheelbase_m: float | np.ndarray = param(0.5, doc="L: rear axle centre to the front axle")
+    half_track_m: float | np.ndarray = param(0.2, doc="l: rear axle centre to each rear wheel")
+    max_wheel_speed_rad_s: float | np.ndarray = param(20.0, doc="every wheel's speed limit")
+    max_steer_rad: float | np.ndarray = param(np.pi / 2, doc="steering angle limit")
+    max_steer_rate_rad_s: float | np.ndarray = param(3.0, doc="steering rate limit")
 
     kind: ClassVar[str] = "tricycle"
     wheel_names: ClassVar[tuple[str, ...]] = ("front", "rear_left", "rear_right")
@@ -38,15 +39,7 @@ class Tricycle:
     holonomic: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
-        check_positive(
-            self,
-            "wheel_radius_m",
-            "wheelbase_m",
-            "half_track_m",
-            "max_wheel_speed_rad_s",
-            "max_steer_rad",
-            "max_steer_rate_rad_s",
-        )
+        check_params(self)
 
     def forward(self, drive: np.ndarray, steering: np.ndarray | None = None) -> np.ndarray:
         """drive ``(N, 1)`` front wheel rad/s, steering ``(N,)`` rad -> twist ``(N, 3)``."""

@@ -4,15 +4,12 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from agvsim.config_base import StrictConfig
 
 
-class _Strict(BaseModel):
-    # as every scenario block: NaN and inf refused, text bounded
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, str_max_length=4096)
-
-
-class TransportEntry(_Strict):
+class TransportEntry(StrictConfig):
     source: str = Field(description="station id (or node id) to pick the load at")
     destination: str = Field(description="station id (or node id) to drop it at")
     at_s: float = Field(
@@ -20,7 +17,7 @@ class TransportEntry(_Strict):
     )
 
 
-class GenerateConfig(_Strict):
+class GenerateConfig(StrictConfig):
     """Orders placed at random (Poisson, seeded) between random source and destination."""
 
     rate_per_h: float = Field(gt=0, le=1e6, description="orders per simulated hour")
@@ -31,7 +28,7 @@ class GenerateConfig(_Strict):
     )
 
 
-class ChargingConfig(_Strict):
+class ChargingConfig(StrictConfig):
     low_pct: float = Field(default=30.0, ge=0, le=100, description="below this: go and charge")
     full_pct: float = Field(default=90.0, ge=0, le=100, description="charge up to this")
 
@@ -44,12 +41,12 @@ class ChargingConfig(_Strict):
         return self
 
 
-class BreakdownEntry(_Strict):
+class BreakdownEntry(StrictConfig):
     vehicle: str = Field(description="serial number of the vehicle that fails")
     at_s: float = Field(ge=0, le=1e7, description="when (simulated s): it stops with a FATAL error")
 
 
-class MasterConfig(_Strict):
+class MasterConfig(StrictConfig):
     fleet_size: int | None = Field(
         default=None, ge=1, description="only the first N vehicles of vda5050 (sweeps)"
     )
