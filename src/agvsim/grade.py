@@ -33,8 +33,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
+from agvsim.config_base import StrictConfig
 from agvsim.experiments.runs import RunTask, execute
 from agvsim.safe_yaml import YamlInputError, load_yaml_file
 from agvsim.scenario import ScenarioError, build, parse_scenario
@@ -42,33 +43,29 @@ from agvsim.scenario import ScenarioError, build, parse_scenario
 STARTUP_LIMIT_S = 120.0  # a task's process must have imported agvsim within this
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class ReachGoal(_Strict):
+class ReachGoal(StrictConfig):
     x_m: float
     y_m: float
     radius_m: float = Field(0.5, gt=0, le=1000)
 
 
-class CaptureGoal(_Strict):
+class CaptureGoal(StrictConfig):
     evader: str = Field(min_length=1, description="the robot to catch")
     radius_m: float = Field(0.8, gt=0, le=1000)
 
 
-class EvadeGoal(_Strict):
+class EvadeGoal(StrictConfig):
     pursuer: str = Field(min_length=1, description="the robot not to be caught by")
     radius_m: float = Field(0.8, gt=0, le=1000)
 
 
-class CoverageGoal(_Strict):
+class CoverageGoal(StrictConfig):
     min_visited_fraction: float | None = Field(None, gt=0, le=1)
     min_seen_fraction: float | None = Field(None, gt=0, le=1)
     return_to_start: bool = False
 
 
-class Goal(_Strict):
+class Goal(StrictConfig):
     reach: ReachGoal | None = None
     capture: CaptureGoal | None = None
     evade: EvadeGoal | None = None
@@ -88,7 +85,7 @@ class Goal(_Strict):
         return next(k for k in ("reach", "capture", "evade", "coverage") if getattr(self, k))
 
 
-class TaskConfig(_Strict):
+class TaskConfig(StrictConfig):
     name: str = Field(min_length=1)
     scenario: str | dict[str, Any] = Field(description="file (relative to the suite) or inline")
     robot: str | None = Field(None, description="robot driven by the student (default: first)")
@@ -100,7 +97,7 @@ class TaskConfig(_Strict):
     collision_penalty: float | None = Field(None, ge=0, description="points off per collision")
 
 
-class SuiteConfig(_Strict):
+class SuiteConfig(StrictConfig):
     name: str = "grading suite"
     description: str = ""
     controller_name: str = Field("controller", description="the function or class to grade")
