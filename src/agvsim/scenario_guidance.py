@@ -1,0 +1,223 @@
+"""Scenario blocks of the industrial guidance and safety sensors (docs/guidance.md):
+
+* world ``tape:`` (magnetic tape or a painted line, and spots), ``floor_codes:`` (a grid of
+  2-D codes) and ``reflectors:`` (laser-navigation reflectors);
+* robot ``safety:`` (a safety laser scanner's field sets) and the sensors ``line`` (a line
+  sensor bar) and ``floor_camera`` (a downward code reader).
+
+Each block is validated here and turned into its core object (agvsim.world.tape,
+agvsim.sensors.safety_fields, line_sensor, floor_codes, reflectors).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from agvsim.config_base import StrictConfig
+from agvsim.sensors.floor_codes import FloorCameraSpec, FloorCodeGrid
+from agvsim.sensors.line_sensor import LineSensorSpec
+from agvsim.sensors.reflectors import ReflectorMap
+from agvsim.sensors.safety_fields import FieldSet, SafetyScannerSpec, check_fields
+from agvsim.world.tape import Arc, Spot, Tape
+
+Point = tuple[float, float]
+Polygon = Annotated[list[Point], Field(min_length=3, max_length=256)]
+Name = Annotated[str, Field(min_length=1, max_length=64)]
+
+
+# ---------------------------------------------------------------------------------- world
+class ArcConfig(StrictConfig):
+    center: Point
+    radius_m: float = Field(gt=0, le=10_000)
+    start_deg: float = Field(ge=-3600, le=3600)
+    sweep_deg: float = Field(ge=-3600, le=3600)
+
+
+class TapeLineConfig(StrictConfig):
+    """One piece of tape: a polyline ``points`` or an ``arc``."""
+
+    points: Annotated[list[Point], Field(min_length=2, max_length=100_000)] | None = None
+    arc: ArcConfig | None = None
+
+    @model_validator(mode="after")
+    def _one_shape(self) -> TapeLineConfig:
+        if (self.points is None) == (self.arc is None):
+            raise ValueError("give either points (a polyline) or arc, not both or neither")
+        return self
+
+
+class SpotConfig(StrictConfig):
+    x_m: float
+    y_m: float
+    code: int = Field(ge=0, le=2**31 - 1)
+
+
+class TapeConfig(StrictConfig):
+    """Guidance tape on the floor (agvsim.world.tape)."""
+
+    width_m: float = Field(0.05, gt=0, le=1)
+    lines: Annotated[list[TapeLineConfig], Field(max_length=10_000)] = []
+    spots: Annotated[list[SpotConfig], Field(max_length=100_000)] = []
+
+
+class FloorCodesConfig(StrictConfig):
+    """A grid of 2-D codes on the floor (agvsim.sensors.floor_codes)."""
+
+    cols: int = Field(ge=1, le=1000)
+    rows: int = Field(ge=1, le=1000)
+    spacing_m: float = Field(1.0, gt=0, le=100)
+    size_m: float = Field(0.05, gt=0, le=10)
+    origin_xy_m: Point = (0.0, 0.0)
+    kind: Literal["aruco", "apriltag"] = "aruco"
+    dictionary: str = Field("4x4_1000", max_length=32)
+
+
+class ReflectorsConfig(StrictConfig):
+    """Retro-reflectors for laser navigation (agvsim.sensors.reflectors)."""
+
+    width_m: float = Field(0.08, gt=0, le=2)
+    points: Annotated[list[Point], Field(max_length=100_000)] = []
+
+
+# ---------------------------------------------------------------------------------- robots
+class FieldSetConfig(StrictConfig):
+    name: Name
+    protective: Polygon
+    warning: Polygon | None = None
+    speed_min_m_s: float = Field(-math.inf, description="inclusive; default: any")
+    speed_max_m_s: float = Field(math.inf, description="exclusive; default: any")
+    steer_min_deg: float = Field(-math.inf, description="inclusive; default: any")
+    steer_max_deg: float = Field(math.inf, description="exclusive; default: any")
+
+    # the open ends are the one place an infinity is allowed
+    model_config = StrictConfig.model_config | {"allow_inf_nan": True}
+
+    @model_validator(mode="after")
+    def _no_nan(self) -> FieldSetConfig:
+        for name in ("speed_min_m_s", "speed_max_m_s", "steer_min_deg", "steer_max_deg"):
+            if math.isnan(getattr(self, name)):
+                raise ValueError(f"{name}: NaN is not allowed")
+        for poly in (self.protective, self.warning or []):
+            if not all(math.isfinite(v) for p in poly for v in p):
+                raise ValueError("polygon points must be finite numbers")
+        return self
+
+
+class SafetyConfig(StrictConfig):
+    """A safety laser scanner on the robot's range sensor ``sensor``."""
+
+    sensor: Name
+    field_sets: Annotated[list[FieldSetConfig], Field(min_length=1, max_length=64)]
+    response_time_s: float = Field(0.1, ge=0, le=10)
+    decel_m_s2: float = Field(1.0, gt=0, le=100)
+    warning_speed_m_s: float = Field(0.3, ge=0, le=100)
+    check_lengths: bool = Field(
+        True, description="refuse fields too short for their speeds (stopping distance)"
+    )
+
+
+class LineSensorConfig(StrictConfig):
+    type: Literal["line"]
+    name: Name | None = None
+    elements: int = Field(16, ge=2, le=256)
+    span_m: float = Field(0.16, gt=0, le=5)
+    mount_x_m: float = Field(0.3, ge=-50, le=50)
+    noise_std_m: float = Field(0.0, ge=0, le=1)
+    spot_radius_m: float = Field(0.05, gt=0, le=5)
+
+
+class FloorCameraConfig(StrictConfig):
+    type: Literal["floor_camera"]
+    name: Name | None = None
+    width_px: int = Field(160, ge=16, le=2048)
+    height_px: int = Field(160, ge=16, le=2048)
+    m_per_px: float = Field(0.001, gt=0, le=0.05)
+    mount_x_m: float = Field(0.0, ge=-50, le=50)
+    mount_y_m: float = Field(0.0, ge=-50, le=50)
+    rate_hz: float = Field(10.0, gt=0, le=1000)
+
+
+# ---------------------------------------------------------------------------------- builders
+def build_tape(cfg: TapeConfig) -> Tape:
+    lines: list = []
+    for line in cfg.lines:
+        if line.arc is not None:
+            a = line.arc
+            lines.append(Arc(a.center[0], a.center[1], a.radius_m, a.start_deg, a.sweep_deg))
+        else:
+            lines.append(line.points)
+    return Tape(lines, cfg.width_m, [Spot(s.x_m, s.y_m, s.code) for s in cfg.spots])
+
+
+def build_floor_codes(cfg: FloorCodesConfig) -> FloorCodeGrid:
+    return FloorCodeGrid(
+        cfg.cols, cfg.rows, cfg.spacing_m, cfg.size_m, cfg.origin_xy_m, cfg.kind, cfg.dictionary
+    )
+
+
+def build_reflectors(cfg: ReflectorsConfig) -> ReflectorMap:
+    import numpy as np
+
+    return ReflectorMap(np.asarray(cfg.points, dtype=np.float64).reshape(-1, 2), cfg.width_m)
+
+
+def build_safety(
+    cfg: SafetyConfig,
+    where: str,
+    front_m: float,
+    rear_m: float,
+    max_speed_m_s: float,
+    max_reverse_m_s: float,
+) -> SafetyScannerSpec:
+    """The scanner, with its fields checked against the robot's stopping distance at the
+    speeds it can drive (``where`` names the block in messages)."""
+    try:
+        spec = SafetyScannerSpec(
+            cfg.sensor,
+            tuple(
+                FieldSet(
+                    f.name,
+                    tuple(f.protective),
+                    None if f.warning is None else tuple(f.warning),
+                    f.speed_min_m_s,
+                    f.speed_max_m_s,
+                    math.radians(f.steer_min_deg),
+                    math.radians(f.steer_max_deg),
+                )
+                for f in cfg.field_sets
+            ),
+            cfg.response_time_s,
+            cfg.decel_m_s2,
+            cfg.warning_speed_m_s,
+        )
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from None
+    if cfg.check_lengths:
+        problems = check_fields(spec, front_m, rear_m, max_speed_m_s, max_reverse_m_s)
+        if problems:
+            raise ValueError(
+                f"{where}: "
+                + "; ".join(problems)
+                + " (set check_lengths: false to run with them anyway)"
+            )
+    return spec
+
+
+def line_sensor_spec(cfg: LineSensorConfig, name: str) -> LineSensorSpec:
+    return LineSensorSpec(
+        name, cfg.elements, cfg.span_m, cfg.mount_x_m, cfg.noise_std_m, cfg.spot_radius_m
+    )
+
+
+def floor_camera_spec(cfg: FloorCameraConfig, name: str) -> FloorCameraSpec:
+    return FloorCameraSpec(
+        name,
+        cfg.width_px,
+        cfg.height_px,
+        cfg.m_per_px,
+        (cfg.mount_x_m, cfg.mount_y_m),
+        cfg.rate_hz,
+    )
