@@ -64,7 +64,7 @@ def truth_relations(path: Path, seed: int = 0) -> Relations:
     scan paired with the scan 10 later (short) and with a random scan (long, loop-closing)."""
     from agvsim.record.mcap_reader import Recording
     from agvsim.record.ros2msg import topic_name
-    from agvsim.slam.recording import McapScanLog, interpolate_poses
+    from agvsim.record.scan_log import McapScanLog, interpolate_poses
     from agvsim.slam.se2 import between
 
     log = McapScanLog(path)
@@ -98,7 +98,7 @@ def run_case(
 ) -> dict[str, float | int | str]:
     """One (log, fault) case; returns its figures (runs in a worker process). ``log`` is a
     data set name of :data:`LOGS` or the path of a simulated ``run.mcap``."""
-    from agvsim.slam.offline import open_log
+    from agvsim.record.scan_log import open_scan_log
 
     if log.endswith(".mcap"):
         path, rel_path = Path(log), None
@@ -115,7 +115,7 @@ def run_case(
             yield rec
 
     t0, c0 = time.perf_counter(), time.process_time()
-    source: Iterable[ScanRecord] = open_log(path)
+    source: Iterable[ScanRecord] = open_scan_log(path)
     if passes > 1:
         source = there_and_back(source, passes)
     slam = map_scans(tap(source))

@@ -12,9 +12,9 @@ pytest.importorskip("rosbags")
 
 from agvsim.record.mcap_reader import RecordingError  # noqa: E402
 from agvsim.record.mcap_writer import Recorder, scenario_yaml  # noqa: E402
+from agvsim.record.scan_log import McapScanLog, interpolate_poses, open_scan_log  # noqa: E402
 from agvsim.scenario import build, parse_scenario  # noqa: E402
-from agvsim.slam.offline import open_log, run_offline  # noqa: E402
-from agvsim.slam.recording import McapScanLog, interpolate_poses  # noqa: E402
+from agvsim.slam.offline import run_offline  # noqa: E402
 
 pytestmark = pytest.mark.slow  # SLAM on recordings
 
@@ -69,7 +69,7 @@ def recording(tmp_path_factory):
 
 def test_scan_log_yields_the_lidar_with_odometry_and_mount(recording):
     path, odom, scans = recording
-    log = open_log(path)  # ".mcap" is registered
+    log = open_scan_log(path)  # ".mcap" is registered
     assert isinstance(log, McapScanLog)
     assert (log.robot, log.sensor) == ("mapper", "lidar")  # the first robot WITH a lidar
     records = list(log)
@@ -97,7 +97,7 @@ def test_scan_log_picks_robot_and_sensor(recording):
 
 def test_offline_slam_maps_a_recording(recording, tmp_path):
     path, _, _ = recording
-    res = run_offline(path, tmp_path / "slam")
+    res = run_offline(open_scan_log(path), tmp_path / "slam")
     assert res.n_scans == 31
     traj = np.loadtxt(res.trajectory_path)
     assert traj.shape == (31, 4) and traj[-1, 0] == pytest.approx(3.0)
@@ -133,7 +133,7 @@ def test_interpolate_poses_wraps_the_heading():
 
 def test_slam_package_never_imports_the_simulator():
     code = (
-        "import sys, agvsim.slam.offline, agvsim.slam.recording\n"
+        "import sys, agvsim.slam.offline, agvsim.record.scan_log\n"
         "print(sorted(m for m in sys.modules if m.startswith(('agvsim.sim', 'agvsim.scenario'))))"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

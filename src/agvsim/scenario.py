@@ -20,7 +20,7 @@ from pydantic import ValidationError
 
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.control.adapters import WheelsFromTwist
-from agvsim.control.api import ControllerContext
+from agvsim.control.api import ControllerContext, ControlMode
 from agvsim.control.avoid import ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.control.traffic import KeepClear, RobotSight, StaticMap, sight_sensor
@@ -56,7 +56,6 @@ from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import (
     BODY_HEIGHT_M,
     WALL_HEIGHT_M,
-    ControlMode,
     OdometrySpec,
     RobotSpec,
     World,

@@ -24,6 +24,7 @@ from pydantic import (
 )
 
 from agvsim.behaviours import BEHAVIOURS
+from agvsim.control.api import ControlMode
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
 from agvsim.master.config import MasterConfig
 from agvsim.metrics.capture import CaptureConfig
@@ -31,7 +32,6 @@ from agvsim.metrics.coverage import CoverageConfig
 from agvsim.metrics.reach import ReachConfig
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
 from agvsim.scenario_limits import MAX_MAGNITUDE, too_large
-from agvsim.sim.spec import ControlMode
 
 
 class _Strict(BaseModel):

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from agvsim.control.api import BatchObservation, LaserScan, Observation
+from agvsim.control.api import BatchObservation, ControlMode, LaserScan, Observation
 from agvsim.sim.state import SensorTable
 
 if TYPE_CHECKING:
@@ -68,7 +68,7 @@ def observation(sim: Simulation, i: int) -> Observation:
         true_pose=st.poses[i].copy(),
         others={sim.robots[j].name: st.poses[j].copy() for j in sim._knows[i]},
         model=robot.model,
-        mode=str(robot.mode),
+        mode=ControlMode(robot.mode),
         dt_s=sim.dt_s,
         images=images,
         depth=depth,

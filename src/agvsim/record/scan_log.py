@@ -1,4 +1,5 @@
-"""Our own recordings as SLAM logs: :class:`McapScanLog` reads ``run.mcap`` (``agvsim run``).
+"""Our own recordings as SLAM logs: :class:`McapScanLog` reads ``run.mcap`` (``agvsim run``),
+and :func:`open_scan_log` opens any log the offline SLAM reads, by its file ending.
 
 Each scan of the chosen robot's lidar (``/<robot>/<sensor>``, ``sensor_msgs/LaserScan``)
 becomes a :class:`~agvsim.slam.carmen.ScanRecord`: its header stamp, ranges (``inf`` kept for no
@@ -8,12 +9,13 @@ mount (``/tf_static``: ``<robot>/base_link`` -> ``<robot>/<sensor>``). By defaul
 robot (scenario order) with a lidar is used.
 
 Reading goes through :mod:`agvsim.record.mcap_reader` (rosbags); the simulator is never
-imported.
+imported. This module sits in the record layer, above :mod:`agvsim.slam`: the SLAM package
+imports nothing of ``agvsim.record``, so the pose-graph optimiser loads no MCAP reader.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +23,10 @@ import numpy as np
 from agvsim.record.mcap_reader import Recording, RecordingError
 from agvsim.record.ros2msg import topic_name
 from agvsim.slam.carmen import ScanRecord
+from agvsim.slam.offline import READERS as SLAM_READERS
+from agvsim.slam.offline import ScanLog, open_log
 
-__all__ = ["McapScanLog", "interpolate_poses"]
+__all__ = ["READERS", "McapScanLog", "interpolate_poses", "open_scan_log"]
 
 
 def interpolate_poses(t_query: np.ndarray, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -91,3 +95,23 @@ class McapScanLog:
                 self.odom_poses[k].copy(),
                 self.laser_offset.copy(),
             )
+
+
+READERS: dict[str, Callable[[Path], ScanLog]] = {
+    **SLAM_READERS,  # CARMEN .clf / .clf.gz
+    ".mcap": McapScanLog,  # agvsim's own recordings (run.mcap)
+}
+
+
+def open_scan_log(path: str | Path, robot: str | None = None, sensor: str | None = None) -> ScanLog:
+    """The reader registered for the file's ending (:data:`READERS`). ``robot`` and ``sensor``
+    pick the scans of a recording of several (agvsim's ``.mcap``); other logs hold one laser."""
+    p = Path(path)
+    if p.name.lower().endswith(".mcap"):
+        return McapScanLog(p, robot, sensor)
+    if robot is not None or sensor is not None:
+        raise ValueError(
+            f"{p}: --robot and --sensor pick the scans of an agvsim recording (.mcap); "
+            "this log holds one laser"
+        )
+    return open_log(p, READERS)
