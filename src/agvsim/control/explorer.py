@@ -11,6 +11,7 @@ from typing import Literal
 
 import numpy as np
 
+from agvsim.angles import wrap_angle
 from agvsim.control.api import LaserScan, Observation, command_for
 from agvsim.control.mobility import wrap
 
@@ -19,7 +20,7 @@ def sector_min(scan: LaserScan, center_rad: float, half_rad: float) -> float:
     """Smallest reading of the beams within +-half_rad of center_rad (robot frame); no return
     counts as range_max + 1, too close as 0. The nearest beam if none falls inside."""
     ang = scan.angle_min_rad + scan.angle_increment_rad * np.arange(len(scan.ranges))
-    off = np.abs((ang - center_rad + np.pi) % (2 * np.pi) - np.pi)
+    off = np.abs(wrap_angle(ang - center_rad))
     sel = off <= half_rad
     if not sel.any():
         sel = off == off.min()

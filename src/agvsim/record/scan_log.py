@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agvsim.angles import wrap_angle
 from agvsim.record.mcap_reader import Recording, RecordingError
 from agvsim.record.ros2msg import topic_name
 from agvsim.slam.carmen import ScanRecord
@@ -39,7 +40,7 @@ def interpolate_poses(t_query: np.ndarray, t: np.ndarray, poses: np.ndarray) -> 
     x = np.interp(t_query, t, poses[:, 0])
     y = np.interp(t_query, t, poses[:, 1])
     a = np.interp(t_query, t, th)
-    a = np.pi - np.mod(np.pi - a, 2 * np.pi)  # wrapped to (-pi, pi]
+    a = wrap_angle(a)
     return np.column_stack([x, y, a])
 
 

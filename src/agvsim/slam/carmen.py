@@ -33,6 +33,8 @@ from typing import IO
 import numpy as np
 from numpy.typing import NDArray
 
+from agvsim.angles import wrap_scalar
+
 __all__ = [
     "CarmenFormatError",
     "CarmenLog",
@@ -126,7 +128,7 @@ def _relative(robot: NDArray[np.float64], laser: NDArray[np.float64]) -> NDArray
     """``robot^-1 * laser`` for single poses."""
     c, s = math.cos(robot[2]), math.sin(robot[2])
     dx, dy = laser[0] - robot[0], laser[1] - robot[1]
-    dth = math.remainder(laser[2] - robot[2], 2.0 * math.pi)
+    dth = wrap_scalar(laser[2] - robot[2])
     return np.array([c * dx + s * dy, -s * dx + c * dy, dth])
 
 
