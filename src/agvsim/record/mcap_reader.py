@@ -152,8 +152,9 @@ class Recording:
         return len(self._raw.get(topic, ()))
 
     @_reading
-    def messages(self, topic: str, type_name: str | None = None) -> list[tuple[float, object]]:
-        """(log time s, decoded message) of every message on ``topic``."""
+    def messages(self, topic: str, type_name: str | None = None) -> list[tuple[float, Any]]:
+        """(log time s, decoded message) of every message on ``topic`` (rosbags' message
+        classes, made from the recording's own definitions: typed ``Any`` here)."""
         if topic not in self.types:
             raise RecordingError(
                 f"{self.path}: no topic {topic!r}; topics: {', '.join(self.topics)}"
@@ -161,8 +162,11 @@ class Recording:
         typ = self.types[topic]
         if type_name is not None and typ != type_name:
             raise RecordingError(f"{self.path}: {topic} holds {typ}, not {type_name}")
-        des = self._store.deserialize_cdr
-        return [(t * 1e-9, des(raw, typ)) for t, raw in self._raw[topic]]
+        return [(t * 1e-9, self._decode(raw, typ)) for t, raw in self._raw[topic]]
+
+    def _decode(self, raw: bytes, type_name: str) -> Any:
+        """One CDR message as rosbags' class of ``type_name`` (a dataclass made at run time)."""
+        return self._store.deserialize_cdr(raw, type_name)
 
     def topics_of_type(self, type_name: str) -> list[str]:
         return [t for t in self.topics if self.types[t] == type_name]
@@ -218,7 +222,7 @@ class Recording:
             if topic in self.types:
                 raise RecordingError(f"{self.path}: {topic} holds no scans")
             self.messages(topic)  # raises: no such topic
-        first = self._store.deserialize_cdr(self._raw[topic][0][1], LASER_SCAN)
+        first = self._decode(self._raw[topic][0][1], LASER_SCAN)
         if self.types[topic] != LASER_SCAN:
             raise RecordingError(f"{self.path}: {topic} holds {self.types[topic]}, not scans")
         n = len(first.ranges)
@@ -346,4 +350,4 @@ class Recording:
     @_reading
     def _beams(self, topic: str) -> int:
         t_ns, raw = self._raw[topic][0]
-        return len(self._store.deserialize_cdr(raw, LASER_SCAN).ranges)
+        return len(self._decode(raw, LASER_SCAN).ranges)
