@@ -75,13 +75,13 @@ def test_scan_log_yields_the_lidar_with_odometry_and_mount(recording):
     records = list(log)
     assert len(log) == len(records) == 31  # 10 Hz over 3 s, t = 0 included
     for rec in records:
-        t = round(rec.timestamp_s, 6)
+        t = round(rec.stamp_s, 6)
         np.testing.assert_allclose(rec.odom_pose, odom[t], atol=1e-12)
         expect = scans[t].astype(np.float32).astype(np.float64)
         expect[~(expect > 0)] = np.inf  # -inf (closer than range_min) carries no distance
-        np.testing.assert_array_equal(rec.ranges_m, expect)
-        assert rec.max_range_m == 8.0
-    np.testing.assert_allclose(records[0].laser_offset, [0.15, 0.0, np.deg2rad(10)], atol=1e-12)
+        np.testing.assert_array_equal(rec.ranges, expect)
+        assert rec.range_max_m == 8.0
+    np.testing.assert_allclose(records[0].mount_pose, [0.15, 0.0, np.deg2rad(10)], atol=1e-12)
     np.testing.assert_allclose(
         records[0].angles_rad, -np.pi + np.arange(120) * (2 * np.pi / 120), atol=1e-6
     )

@@ -25,7 +25,7 @@ _PUBLIC = {
     "Binding": "agvsim.sim.engine",
     "ControlMode": "agvsim.control.api",
     "ControllerError": "agvsim.sim.engine",
-    "LaserScan": "agvsim.control.api",
+    "LaserScan": "agvsim.scan",
     "Observation": "agvsim.control.api",
     "RobotSpec": "agvsim.sim.spec",
     "Scenario": "agvsim.scenario",
@@ -69,13 +69,13 @@ def __getattr__(name: str):
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from agvsim.control.api import (
         ControlMode,
-        LaserScan,
         Observation,
         Twist,
         WheelCommand,
         command_for,
     )
     from agvsim.control.statemachine import StateMachine
+    from agvsim.scan import LaserScan
     from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
     from agvsim.sim.engine import Binding, ControllerError, Simulation
     from agvsim.sim.spec import RobotSpec, World

@@ -21,6 +21,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from agvsim.scan import LaserScan
+
 
 class ControlMode(StrEnum):
     """What a controller commands: a body twist (inverse kinematics computes the wheels) or the
@@ -32,29 +34,12 @@ class ControlMode(StrEnum):
 
 
 @dataclass(frozen=True)
-class LaserScan:
-    """One scan in ``sensor_msgs/LaserScan`` layout (inf = no return, -inf = too close)."""
-
-    stamp_s: float
-    angle_min_rad: float
-    angle_increment_rad: float
-    range_min_m: float
-    range_max_m: float
-    ranges: np.ndarray  # (B,) m
-
-    @property
-    def hits(self) -> np.ndarray:
-        """(B,) bool: the thesis rangers' hit flag (a return within range)."""
-        return np.isfinite(self.ranges) | (self.ranges == -np.inf)
-
-
-@dataclass(frozen=True)
 class Observation:
     """What one robot's controller sees at time ``t_s``."""
 
     t_s: float
     name: str
-    scans: dict[str, LaserScan]
+    scans: dict[str, LaserScan]  # sensor frame + mount pose (agvsim.scan)
     odom_pose: np.ndarray  # (3,) dead-reckoned x, y, theta from wheel encoders
     wheel_speeds: np.ndarray  # (W,) measured rad/s
     bump: bool  # collided during the last step

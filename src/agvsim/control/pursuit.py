@@ -49,7 +49,7 @@ def _scan(obs: Observation, sensor: str) -> LaserScan:
 def _readings(scan: LaserScan) -> tuple[np.ndarray, np.ndarray]:
     """(angles rad in the robot frame, ranges m): no return reads range_max, too close 0."""
     ranges = np.nan_to_num(scan.ranges, posinf=scan.range_max_m, neginf=0.0)
-    angles = scan.angle_min_rad + scan.angle_increment_rad * np.arange(len(ranges))
+    angles = scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(len(ranges))
     return angles, ranges
 
 
@@ -82,7 +82,7 @@ class FreeSpace:
         ranges = np.where(scan.ranges == -np.inf, 0.0, scan.ranges)
         n = len(ranges)
         self.mount = (float(mount_xy_m[0]), float(mount_xy_m[1]))
-        self.a0, self.inc = scan.angle_min_rad, scan.angle_increment_rad
+        self.a0, self.inc = scan.robot_angle_min_rad, scan.angle_increment_rad
         self.r_max = scan.range_max_m
         self.full = n > 1 and abs(n * self.inc - 2 * math.pi) < 1e-6
         angles = self.a0 + self.inc * np.arange(n)

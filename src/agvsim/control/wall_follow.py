@@ -326,7 +326,7 @@ def _returns_xy(scan: LaserScan, mount_xy: tuple[float, float]) -> np.ndarray:
     """(K, 2) points of a scan's returns in the robot (P) frame; -inf (too close) counts as
     a return at range_min."""
     r = np.where(scan.ranges == -np.inf, scan.range_min_m, scan.ranges)
-    a = scan.angle_min_rad + scan.angle_increment_rad * np.arange(r.size)
+    a = scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(r.size)
     ok = np.isfinite(r)
     r, a = r[ok], a[ok]
     return np.column_stack([mount_xy[0] + r * np.cos(a), mount_xy[1] + r * np.sin(a)])

@@ -143,7 +143,9 @@ class CorridorCoverage:
         mx, my = spec.mount_xy_m
         ox = x + math.cos(th) * mx - math.sin(th) * my
         oy = y + math.sin(th) * mx + math.cos(th) * my
-        angles = th + scan.angle_min_rad + scan.angle_increment_rad * np.arange(scan.ranges.size)
+        angles = (
+            th + scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(scan.ranges.size)
+        )
         r = scan.ranges
         length = np.where(np.isfinite(r), r, np.where(r > 0, scan.range_max_m, scan.range_min_m))
         gx, gy = self.grid.origin_xy_m

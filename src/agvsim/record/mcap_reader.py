@@ -2,7 +2,7 @@
 
     rec = Recording("runs/x/run.mcap")
     t, poses, twists = rec.odometry("/differential/ground_truth")   # (T,), (T, 3), (T, 3)
-    scans = rec.laser_scans("/differential/lidar")                  # ScanSeries
+    scans = rec.laser_scans("/differential/lidar")                  # ScanSeries (T scans)
     grids = rec.occupancy("/map")                                   # [GridMessage]
 
 A file cut off in the middle of a write (the machine died) has no footer; it is repaired into
@@ -26,6 +26,7 @@ import numpy as np
 
 from agvsim.record.mcap_file import repair, scan_records
 from agvsim.record.ros2msg import LASER_SCAN, OCCUPANCY_GRID, ODOMETRY, STRING, topic_name
+from agvsim.scan import LaserScan
 
 __all__ = ["GridMessage", "Recording", "RecordingError", "ScanSeries"]
 
@@ -59,19 +60,37 @@ def _reading(method: _F) -> _F:
 
 @dataclass(frozen=True)
 class ScanSeries:
-    """Every message of one ``sensor_msgs/LaserScan`` topic (one sensor)."""
+    """Every message of one ``sensor_msgs/LaserScan`` topic (one sensor): the batch form of
+    :class:`agvsim.scan.LaserScan`, with its field names; ``scan(k)`` is the k-th scan."""
 
     frame_id: str
-    t_s: np.ndarray  # (T,) header stamps
+    stamp_s: np.ndarray  # (T,) header stamps
     ranges: np.ndarray  # (T, B) float64 (float32 values), inf / -inf kept
-    angle_min_rad: float
+    angle_min_rad: float  # sensor frame
     angle_increment_rad: float
     range_min_m: float
     range_max_m: float
+    mount_pose: np.ndarray  # (3,) x, y, yaw of the sensor on the robot (/tf_static; 0 if absent)
+
+    def __len__(self) -> int:
+        return len(self.stamp_s)
 
     @property
     def angles_rad(self) -> np.ndarray:
+        """(B,) beam directions in the sensor frame."""
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.ranges.shape[1])
+
+    def scan(self, k: int) -> LaserScan:
+        """The k-th scan (its ranges a copy)."""
+        return LaserScan(
+            float(self.stamp_s[k]),
+            self.angle_min_rad,
+            self.angle_increment_rad,
+            self.range_min_m,
+            self.range_max_m,
+            self.ranges[k].copy(),
+            self.mount_pose.copy(),
+        )
 
 
 @dataclass(frozen=True)
@@ -242,14 +261,16 @@ class Recording:
                 )
             t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in msgs])
             ranges = np.array([m.ranges for _, m in msgs], dtype=np.float64).reshape(-1, n)
+        mount = self.static_transforms().get(first.header.frame_id)
         return ScanSeries(
             frame_id=first.header.frame_id,
-            t_s=t,
+            stamp_s=t,
             ranges=ranges,
             angle_min_rad=float(first.angle_min),
             angle_increment_rad=float(first.angle_increment),
             range_min_m=float(first.range_min),
             range_max_m=float(first.range_max),
+            mount_pose=np.array(mount[1:] if mount is not None else (0.0, 0.0, 0.0)),
         )
 
     @_reading

@@ -1,6 +1,7 @@
 """Offline SLAM over a recorded log: :func:`run_offline`.
 
-Reads a log through a :class:`ScanLog` (a sized iterable of :class:`~.carmen.ScanRecord`; the
+Reads a log through a :class:`ScanLog` (a sized iterable of :class:`~agvsim.scan.LaserScan`
+with their ``odom_pose``; the
 :data:`READERS` registry maps file name endings to readers: CARMEN ``.clf``/``.clf.gz``; agvsim's
 own recordings are read by :mod:`agvsim.record.scan_log`, in the layer above, whose
 ``open_scan_log`` also opens these), runs :class:`~.graph_slam.GraphSlam` and writes
@@ -19,7 +20,8 @@ from typing import Protocol
 
 import numpy as np
 
-from agvsim.slam.carmen import CarmenLog, ScanRecord
+from agvsim.scan import LaserScan
+from agvsim.slam.carmen import CarmenLog
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.mapping import save_map_png, save_ros_map
 
@@ -41,7 +43,7 @@ class ScanLog(Protocol):
 
     def __len__(self) -> int: ...
 
-    def __iter__(self) -> Iterator[ScanRecord]: ...
+    def __iter__(self) -> Iterator[LaserScan]: ...
 
 
 READERS: dict[str, Callable[[Path], ScanLog]] = {
@@ -92,7 +94,7 @@ def write_trajectory(path: Path, timestamps: np.ndarray, poses: np.ndarray) -> P
 
 
 def map_scans(
-    scans: Iterable[ScanRecord],
+    scans: Iterable[LaserScan],
     config: SlamConfig | None = None,
     progress: Callable[[int], None] | None = None,
     max_scans: int | None = None,
@@ -104,9 +106,11 @@ def map_scans(
     for rec in scans:
         if max_scans is not None and n >= max_scans:
             break
+        if rec.odom_pose is None:
+            raise ValueError(f"the scan at {rec.stamp_s} s has no odometry pose (odom_pose)")
         if slam is None:
-            slam = GraphSlam(rec.max_range_m, rec.laser_offset, config)
-        slam.update(rec.timestamp_s, rec.ranges_m, rec.angles_rad, rec.odom_pose)
+            slam = GraphSlam(rec.range_max_m, rec.mount_pose, config)
+        slam.update(rec.stamp_s, rec.ranges, rec.angles_rad, rec.odom_pose)
         n += 1
         if progress is not None and n % 100 == 0:
             progress(n)
