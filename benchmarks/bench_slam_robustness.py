@@ -37,7 +37,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from agvsim.slam.carmen import ScanRecord  # noqa: E402
+from agvsim.scan import LaserScan  # noqa: E402
 from agvsim.slam.datasets import datasets_dir  # noqa: E402
 from agvsim.slam.evaluate import (  # noqa: E402
     Relations,
@@ -64,12 +64,12 @@ def truth_relations(path: Path, seed: int = 0) -> Relations:
     scan paired with the scan 10 later (short) and with a random scan (long, loop-closing)."""
     from agvsim.record.mcap_reader import Recording
     from agvsim.record.ros2msg import topic_name
-    from agvsim.slam.recording import McapScanLog, interpolate_poses
+    from agvsim.record.scan_log import McapScanLog, interpolate_poses
     from agvsim.slam.se2 import between
 
     log = McapScanLog(path)
     t_gt, gt, _ = Recording(path).odometry(f"/{topic_name(log.robot)}/ground_truth")
-    t = log.scans.t_s
+    t = log.scans.stamp_s
     truth = interpolate_poses(t, t_gt, gt)
     i = np.arange(0, len(t) - 10, 5)
     j = np.concatenate([i + 10, np.random.default_rng(seed).integers(0, len(t), len(i))])
@@ -77,20 +77,20 @@ def truth_relations(path: Path, seed: int = 0) -> Relations:
     return Relations(t[i], t[j], between(truth[i], truth[j]))
 
 
-def there_and_back(scans: Iterable[ScanRecord], passes: int) -> Iterator[ScanRecord]:
+def there_and_back(scans: Iterable[LaserScan], passes: int) -> Iterator[LaserScan]:
     """The log driven ``passes`` times: forward, backward (the scans in reverse order, time
     mirrored), forward, ... A long log from a short one, for memory (the scans are held)."""
     from dataclasses import replace
 
     first = list(scans)
     yield from first
-    t0, t1 = first[0].timestamp_s, first[-1].timestamp_s
+    t0, t1 = first[0].stamp_s, first[-1].stamp_s
     span = t1 - t0 + 0.1
     for k in range(1, passes):
         order = first[::-1] if k % 2 else first
         for rec in order:
-            t = (t1 + (t1 - rec.timestamp_s)) if k % 2 else rec.timestamp_s
-            yield replace(rec, timestamp_s=t + (k - (k % 2)) * span + (0.1 if k % 2 else 0.0))
+            t = (t1 + (t1 - rec.stamp_s)) if k % 2 else rec.stamp_s
+            yield replace(rec, stamp_s=t + (k - (k % 2)) * span + (0.1 if k % 2 else 0.0))
 
 
 def run_case(
@@ -98,7 +98,7 @@ def run_case(
 ) -> dict[str, float | int | str]:
     """One (log, fault) case; returns its figures (runs in a worker process). ``log`` is a
     data set name of :data:`LOGS` or the path of a simulated ``run.mcap``."""
-    from agvsim.slam.offline import open_log
+    from agvsim.record.scan_log import open_scan_log
 
     if log.endswith(".mcap"):
         path, rel_path = Path(log), None
@@ -108,14 +108,14 @@ def run_case(
     stamps: list[float] = []
     odoms: list[np.ndarray] = []
 
-    def tap(scans: Iterable[ScanRecord]) -> Iterator[ScanRecord]:
+    def tap(scans: Iterable[LaserScan]) -> Iterator[LaserScan]:
         for rec in apply_fault(scans, fault, rng):
-            stamps.append(rec.timestamp_s)
+            stamps.append(rec.stamp_s)
             odoms.append(rec.odom_pose)
             yield rec
 
     t0, c0 = time.perf_counter(), time.process_time()
-    source: Iterable[ScanRecord] = open_log(path)
+    source: Iterable[LaserScan] = open_scan_log(path)
     if passes > 1:
         source = there_and_back(source, passes)
     slam = map_scans(tap(source))

@@ -9,11 +9,11 @@ import json
 import numpy as np
 import pytest
 
-from agvsim.control.api import Twist, WheelCommand, command_for
+from agvsim.control.api import ControlMode, Twist, WheelCommand, command_for
 from agvsim.kinematics import Ackermann, DifferentialDrive
 from agvsim.runner import run_scenario
 from agvsim.sim.engine import Binding, ControllerError, Simulation
-from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
+from agvsim.sim.spec import OdometrySpec, RobotSpec, World
 from agvsim.world.grid import OccupancyGrid
 
 

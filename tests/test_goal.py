@@ -16,12 +16,12 @@ from agvsim.behaviours import (
     build_teleop,
     build_waypoints,
 )
-from agvsim.control.api import ControllerContext, Twist, WheelCommand
+from agvsim.control.api import ControllerContext, ControlMode, Twist, WheelCommand
 from agvsim.control.goal import PID, GoToGoal, Mobility, PathTracker, PurePursuit
 from agvsim.control.teleop import KEYS, Teleop, key_name
 from agvsim.kinematics import MODELS
 from agvsim.sim.engine import Binding, Simulation
-from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
+from agvsim.sim.spec import OdometrySpec, RobotSpec, World
 from agvsim.world.grid import OccupancyGrid
 
 ALL_MODELS = ["differential", "tricycle", "ackermann", "mecanum", "omni3"]

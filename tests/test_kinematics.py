@@ -433,33 +433,6 @@ def test_saturation_keeps_direction(
     assert np.abs(act.wheel_speeds[:, driven]).max() <= limit + 1e-12
 
 
-@PROPERTY
-@given(a=st.floats(-1e6, 1e6, allow_nan=False))
-@example(a=math.pi)
-@example(a=-math.pi)
-@example(a=3 * math.pi)
-@example(a=-3 * math.pi)
-@example(a=2 * math.pi)
-@example(a=0.0)
-def test_wrap_angle(a: float) -> None:
-    w = float(wrap_angle(a))
-    assert -math.pi < w <= math.pi
-    k = round((a - w) / (2 * math.pi))
-    assert abs(a - w - 2 * math.pi * k) <= 1e-15 * max(1.0, abs(a)) * 8
-    assert float(wrap_angle(w)) == w  # idempotent
-    if -math.pi < a <= math.pi:
-        assert w == pytest.approx(a, abs=1e-15)
-
-
-def test_wrap_angle_batches() -> None:
-    a = np.array([[0.5, -0.5 + 4 * math.pi], [math.pi, -math.pi]])
-    np.testing.assert_allclose(wrap_angle(a), [[0.5, -0.5], [math.pi, math.pi]], atol=1e-14)
-
-
-def test_wrap_angle_just_above_pi() -> None:
-    assert float(wrap_angle(np.nextafter(math.pi, 4.0))) > -math.pi
-
-
 poses = st.tuples(st.floats(-10.0, 10.0), st.floats(-10.0, 10.0), st.floats(-math.pi, math.pi))
 body_twists = st.tuples(speeds, speeds, st.floats(-5.0, 5.0))
 steps = st.floats(1e-3, 0.5)

@@ -12,7 +12,7 @@ import yaml
 from pydantic import ValidationError
 
 from agvsim.behaviours import MazeSolverConfig, build_maze_solver
-from agvsim.control.api import ControllerContext
+from agvsim.control.api import ControllerContext, ControlMode
 from agvsim.control.maze_solver import (
     AStarMazeSolver,
     ClearanceMap,
@@ -25,7 +25,7 @@ from agvsim.scenario import ScenarioError, load_scenario, parse_scenario
 from agvsim.scenario import build as build_scenario
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
-from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
+from agvsim.sim.spec import OdometrySpec, RobotSpec, World
 from agvsim.world.grid import OccupancyGrid
 from agvsim.world.mazes import random_maze
 

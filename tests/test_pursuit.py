@@ -18,13 +18,20 @@ import yaml
 from pydantic import ValidationError
 
 from agvsim.behaviours import EvadeConfig, PursueConfig, build_evade, build_pursue
-from agvsim.control.api import ControllerContext, LaserScan, Observation, Twist, WheelCommand
+from agvsim.control.api import (
+    ControllerContext,
+    ControlMode,
+    LaserScan,
+    Observation,
+    Twist,
+    WheelCommand,
+)
 from agvsim.control.pursuit import Evader, FreeSpace, Pursuer
 from agvsim.kinematics import DifferentialDrive
 from agvsim.metrics.capture import Capture, CaptureConfig, build_capture
 from agvsim.scenario import WorldConfig, build_grid, parse_robot, robot_spec
 from agvsim.sim.engine import Binding, Simulation
-from agvsim.sim.spec import ControlMode, RobotSpec, World
+from agvsim.sim.spec import RobotSpec, World
 from agvsim.world.grid import OccupancyGrid
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,9 +12,9 @@ pytest.importorskip("rosbags")
 
 from agvsim.record.mcap_reader import RecordingError  # noqa: E402
 from agvsim.record.mcap_writer import Recorder, scenario_yaml  # noqa: E402
+from agvsim.record.scan_log import McapScanLog, interpolate_poses, open_scan_log  # noqa: E402
 from agvsim.scenario import build, parse_scenario  # noqa: E402
-from agvsim.slam.offline import open_log, run_offline  # noqa: E402
-from agvsim.slam.recording import McapScanLog, interpolate_poses  # noqa: E402
+from agvsim.slam.offline import run_offline  # noqa: E402
 
 pytestmark = pytest.mark.slow  # SLAM on recordings
 
@@ -69,19 +69,19 @@ def recording(tmp_path_factory):
 
 def test_scan_log_yields_the_lidar_with_odometry_and_mount(recording):
     path, odom, scans = recording
-    log = open_log(path)  # ".mcap" is registered
+    log = open_scan_log(path)  # ".mcap" is registered
     assert isinstance(log, McapScanLog)
     assert (log.robot, log.sensor) == ("mapper", "lidar")  # the first robot WITH a lidar
     records = list(log)
     assert len(log) == len(records) == 31  # 10 Hz over 3 s, t = 0 included
     for rec in records:
-        t = round(rec.timestamp_s, 6)
+        t = round(rec.stamp_s, 6)
         np.testing.assert_allclose(rec.odom_pose, odom[t], atol=1e-12)
         expect = scans[t].astype(np.float32).astype(np.float64)
         expect[~(expect > 0)] = np.inf  # -inf (closer than range_min) carries no distance
-        np.testing.assert_array_equal(rec.ranges_m, expect)
-        assert rec.max_range_m == 8.0
-    np.testing.assert_allclose(records[0].laser_offset, [0.15, 0.0, np.deg2rad(10)], atol=1e-12)
+        np.testing.assert_array_equal(rec.ranges, expect)
+        assert rec.range_max_m == 8.0
+    np.testing.assert_allclose(records[0].mount_pose, [0.15, 0.0, np.deg2rad(10)], atol=1e-12)
     np.testing.assert_allclose(
         records[0].angles_rad, -np.pi + np.arange(120) * (2 * np.pi / 120), atol=1e-6
     )
@@ -97,7 +97,7 @@ def test_scan_log_picks_robot_and_sensor(recording):
 
 def test_offline_slam_maps_a_recording(recording, tmp_path):
     path, _, _ = recording
-    res = run_offline(path, tmp_path / "slam")
+    res = run_offline(open_scan_log(path), tmp_path / "slam")
     assert res.n_scans == 31
     traj = np.loadtxt(res.trajectory_path)
     assert traj.shape == (31, 4) and traj[-1, 0] == pytest.approx(3.0)
@@ -133,7 +133,7 @@ def test_interpolate_poses_wraps_the_heading():
 
 def test_slam_package_never_imports_the_simulator():
     code = (
-        "import sys, agvsim.slam.offline, agvsim.slam.recording\n"
+        "import sys, agvsim.slam.offline, agvsim.record.scan_log\n"
         "print(sorted(m for m in sys.modules if m.startswith(('agvsim.sim', 'agvsim.scenario'))))"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

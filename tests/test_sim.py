@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agvsim.control.api import Twist, WheelCommand
+from agvsim.control.api import ControlMode, Twist, WheelCommand
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.kinematics import Ackermann, DifferentialDrive, Mecanum, Tricycle
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, ControllerError, Simulation
-from agvsim.sim.spec import ControlMode, OdometrySpec, RobotSpec, World
+from agvsim.sim.spec import OdometrySpec, RobotSpec, World
 from agvsim.world.grid import OccupancyGrid
 
 

@@ -32,7 +32,7 @@ class LeftWallFollower:
         scan = obs.scans["lidar"]
         ranges = np.where(np.isposinf(scan.ranges), scan.range_max_m, scan.ranges)
         ranges = np.maximum(ranges, 0.0)  # -inf: closer than range_min
-        angles = scan.angle_min_rad + scan.angle_increment_rad * np.arange(ranges.size)
+        angles = scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(ranges.size)
 
         def nearest(lo_deg, hi_deg):
             inside = (angles >= math.radians(lo_deg)) & (angles <= math.radians(hi_deg))

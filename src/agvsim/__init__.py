@@ -23,9 +23,9 @@ __version__ = "0.1.0"
 
 _PUBLIC = {
     "Binding": "agvsim.sim.engine",
-    "ControlMode": "agvsim.sim.spec",
+    "ControlMode": "agvsim.control.api",
     "ControllerError": "agvsim.sim.engine",
-    "LaserScan": "agvsim.control.api",
+    "LaserScan": "agvsim.scan",
     "Observation": "agvsim.control.api",
     "RobotSpec": "agvsim.sim.spec",
     "Scenario": "agvsim.scenario",
@@ -67,8 +67,15 @@ def __getattr__(name: str):
 
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
-    from agvsim.control.api import LaserScan, Observation, Twist, WheelCommand, command_for
+    from agvsim.control.api import (
+        ControlMode,
+        Observation,
+        Twist,
+        WheelCommand,
+        command_for,
+    )
     from agvsim.control.statemachine import StateMachine
+    from agvsim.scan import LaserScan
     from agvsim.scenario import Scenario, ScenarioError, build, load_scenario
     from agvsim.sim.engine import Binding, ControllerError, Simulation
-    from agvsim.sim.spec import ControlMode, RobotSpec, World
+    from agvsim.sim.spec import RobotSpec, World

@@ -544,6 +544,7 @@ def _slam_log(
     robot: str | None = None,
     sensor: str | None = None,
 ) -> None:
+    from agvsim.record.scan_log import open_scan_log
     from agvsim.slam.carmen import CarmenFormatError
     from agvsim.slam.offline import run_offline
 
@@ -562,12 +563,10 @@ def _slam_log(
         ) as bar:
             task = bar.add_task("slam", total=None, name=log.name)
             result = run_offline(
-                log,
+                open_scan_log(log, robot, sensor),
                 out_dir,
                 max_scans=max_scans,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
-                robot=robot,
-                sensor=sensor,
             )
     except (CarmenFormatError, ValueError) as e:
         _fail("error", e)

@@ -27,6 +27,7 @@ from pydantic import (
 
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.config_base import StrictConfig, did_you_mean
+from agvsim.control.api import ControlMode
 from agvsim.fleet.config import LayoutConfig, Vda5050Config
 from agvsim.kinematics import MODELS
 from agvsim.master.config import MasterConfig
@@ -51,7 +52,6 @@ from agvsim.scenario_controllers import (
 )
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
 from agvsim.scenario_params import PARAMS
-from agvsim.sim.spec import ControlMode
 
 # Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
 Seed = Annotated[int, Field(ge=0, le=2**63 - 1, description="0 .. 2^63 - 1")]

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agvsim.scan import LaserScan
 from agvsim.slam.carmen import (
     CarmenFormatError,
     CarmenLog,
     OdomRecord,
-    ScanRecord,
     carmen_angles,
     read_carmen,
 )
@@ -51,23 +51,23 @@ def test_flaser_and_robotlaser_records(tmp_path: Path) -> None:
     path = tmp_path / "small.clf"
     path.write_text(LOG)
     recs = list(read_carmen(path, with_odom=True))
-    assert [type(r) for r in recs] == [OdomRecord, ScanRecord, ScanRecord]
+    assert [type(r) for r in recs] == [OdomRecord, LaserScan, LaserScan]
     odom, fl, rl = recs
-    assert isinstance(odom, OdomRecord) and isinstance(fl, ScanRecord)
-    assert isinstance(rl, ScanRecord)
-    assert odom.timestamp_s == 100.0 and np.allclose(odom.pose, [1.0, 2.0, 0.1])
+    assert isinstance(odom, OdomRecord) and isinstance(fl, LaserScan)
+    assert isinstance(rl, LaserScan)
+    assert odom.stamp_s == 100.0 and np.allclose(odom.pose, [1.0, 2.0, 0.1])
     # FLASER: 180 beams from -90 deg, 1 deg apart; the largest reading of the log is no return
-    assert fl.timestamp_s == 100.5 and fl.max_range_m == pytest.approx(81.83)
+    assert fl.stamp_s == 100.5 and fl.range_max_m == pytest.approx(81.83)
     assert fl.angles_rad[0] == pytest.approx(-math.pi / 2)
     assert fl.angles_rad[-1] == pytest.approx(math.radians(89.0))
-    assert np.isinf(fl.ranges_m[-1]) and np.all(fl.ranges_m[:-1] == 1.0)
+    assert np.isinf(fl.ranges[-1]) and np.all(fl.ranges[:-1] == 1.0)
     assert np.allclose(fl.odom_pose, [1.0, 2.0, 0.1])
     # laser 0.1 m ahead along the world x axis, robot heading 0.1 rad: T_robot_laser
-    assert np.allclose(fl.laser_offset, [0.1 * math.cos(0.1), -0.1 * math.sin(0.1), 0.0])
+    assert np.allclose(fl.mount_pose, [0.1 * math.cos(0.1), -0.1 * math.sin(0.1), 0.0])
     # ROBOTLASER1: own geometry, a reading at max_range is no return, remissions skipped
     assert np.allclose(rl.angles_rad, [-1.0, -0.5, 0.0, 0.5, 1.0])
-    assert rl.max_range_m == 30.0 and np.isinf(rl.ranges_m[2])
-    assert np.allclose(rl.odom_pose, [1.0, 2.0, 0.5]) and np.allclose(rl.laser_offset, 0.0)
+    assert rl.range_max_m == 30.0 and np.isinf(rl.ranges[2])
+    assert np.allclose(rl.odom_pose, [1.0, 2.0, 0.5]) and np.allclose(rl.mount_pose, 0.0)
 
 
 def test_gzip_log_and_sized_iterable(tmp_path: Path) -> None:
@@ -76,7 +76,7 @@ def test_gzip_log_and_sized_iterable(tmp_path: Path) -> None:
         f.write(LOG)
     log = CarmenLog(path)
     assert len(log) == 2 and log.flaser_max_range_m == pytest.approx(81.83)
-    assert [r.timestamp_s for r in log] == [100.5, 101.5]
+    assert [r.stamp_s for r in log] == [100.5, 101.5]
 
 
 def test_carmen_angle_convention() -> None:
@@ -120,4 +120,4 @@ def test_intel_log_first_scans() -> None:
     log = CarmenLog(root / "intel" / "intel.clf.gz")
     assert len(log) == 13631 and log.flaser_max_range_m == pytest.approx(81.83)
     first = next(iter(log))
-    assert first.ranges_m.shape == (180,) and first.timestamp_s == pytest.approx(976052857.33753)
+    assert first.ranges.shape == (180,) and first.stamp_s == pytest.approx(976052857.33753)

@@ -230,7 +230,7 @@ def test_intel_slice_runs_and_improves_on_odometry(tmp_path: Path) -> None:
     recs = [r for _, r in zip(range(n), CarmenLog(log_path), strict=False)]
     odom = write_trajectory(
         tmp_path / "odom.txt",
-        np.array([r.timestamp_s for r in recs]),
+        np.array([r.stamp_s for r in recs]),
         np.array([r.odom_pose for r in recs]),
     )
     rel = load_relations(root / "intel" / "intel.relations")

@@ -7,29 +7,29 @@ import math
 import numpy as np
 import pytest
 
-from agvsim.slam.carmen import ScanRecord
+from agvsim.scan import LaserScan
 from agvsim.slam.perturb import Fault, FaultConfig, apply_fault
 from agvsim.slam.se2 import between, compose
 
 
-def scans(n: int = 400, rate_hz: float = 5.0) -> list[ScanRecord]:
+def scans(n: int = 400, rate_hz: float = 5.0) -> list[LaserScan]:
     """A robot driving 0.1 m and turning 0.05 rad per scan; 10 beams, one without a return."""
     pose = np.array([1.0, -2.0, 0.3])
     out = []
     ranges = np.array([1.0, 2.0, np.inf, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0])
     for k in range(n):
         out.append(
-            ScanRecord(k / rate_hz, ranges.copy(), np.linspace(-1, 1, 10), 80.0, pose, np.zeros(3))
+            LaserScan(k / rate_hz, -1.0, 2.0 / 9.0, 0.0, 80.0, ranges.copy(), np.zeros(3), pose)
         )
         pose = compose(pose, np.array([0.1, 0.0, 0.05]))
     return out
 
 
-def run(fault: str, seed: int = 0, cfg: FaultConfig | None = None) -> list[ScanRecord]:
+def run(fault: str, seed: int = 0, cfg: FaultConfig | None = None) -> list[LaserScan]:
     return list(apply_fault(scans(), fault, np.random.default_rng(seed), cfg))
 
 
-def steps(recs: list[ScanRecord]) -> np.ndarray:
+def steps(recs: list[LaserScan]) -> np.ndarray:
     o = np.array([r.odom_pose for r in recs])
     return between(o[:-1], o[1:])
 
@@ -40,10 +40,10 @@ def test_none_is_the_identity_and_faults_are_deterministic() -> None:
     assert all(a is b for a, b in zip(base, same, strict=True))
     for f in Fault:
         a, b = run(f, seed=5), run(f, seed=5)
-        assert [r.timestamp_s for r in a] == [r.timestamp_s for r in b]
+        assert [r.stamp_s for r in a] == [r.stamp_s for r in b]
         for ra, rb in zip(a, b, strict=True):
             np.testing.assert_array_equal(ra.odom_pose, rb.odom_pose)
-            np.testing.assert_array_equal(ra.ranges_m, rb.ranges_m)
+            np.testing.assert_array_equal(ra.ranges, rb.ranges)
 
 
 def test_scale_lengthens_translation_only() -> None:
@@ -75,7 +75,7 @@ def test_freeze_repeats_then_jumps_back_to_the_truth() -> None:
 
 
 def test_thin_keeps_the_rate() -> None:
-    t = np.array([r.timestamp_s for r in run("thin", cfg=FaultConfig(thin_rate_hz=1.5))])
+    t = np.array([r.stamp_s for r in run("thin", cfg=FaultConfig(thin_rate_hz=1.5))])
     assert np.diff(t).min() >= 1 / 1.5 - 1e-12 and np.diff(t).max() <= 1 / 1.5 + 0.2 + 1e-12
 
 
@@ -86,9 +86,9 @@ def test_drop_loses_about_the_fraction() -> None:
 
 def test_range_noise_keeps_no_returns_and_the_range_limits() -> None:
     out = run("range-noise", cfg=FaultConfig(range_noise_m=0.5))
-    r = np.array([x.ranges_m for x in out])
+    r = np.array([x.ranges for x in out])
     assert np.all(np.isinf(r[:, 2])) and np.all(np.isfinite(np.delete(r, 2, axis=1)))
-    noise = np.delete(r, 2, axis=1) - np.delete(scans()[0].ranges_m, 2)
+    noise = np.delete(r, 2, axis=1) - np.delete(scans()[0].ranges, 2)
     assert noise.std() == pytest.approx(0.5, rel=0.1) and r[np.isfinite(r)].min() >= 0.0
 
 

@@ -66,7 +66,7 @@ def test_truncated_gzip_is_mapped_up_to_the_cut_with_a_warning(tmp_path: Path) -
     scans = list(log)
     assert 0 < len(scans) < 80 and log.truncated_after_line is not None
     # every line handed on is whole: the last scan has all its 180 ranges
-    assert scans[-1].ranges_m.shape == (180,)
+    assert scans[-1].ranges.shape == (180,)
     res = run_offline(cut, tmp_path / "o")
     assert res.n_scans == len(scans) and "cut off after line" in res.warnings[0]
     code, out = cli("slam", str(cut), "--out", str(tmp_path / "o2"), "-q")

@@ -103,7 +103,7 @@ class ReplaySession:
             topic = f"/{topic_name(names[int(tab.owner[s])])}/{topic_name(tab.specs[s].name)}"
             if topic in rec.types and rec.count(topic):
                 ser = rec.laser_scans(topic)
-                self._scans.append((ser.t_s, ser.ranges))
+                self._scans.append((ser.stamp_s, ser.ranges))
             else:
                 self._scans.append(None)
         self.states: list[tuple[np.ndarray, list[str]]] = []

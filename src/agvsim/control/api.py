@@ -16,26 +16,21 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from agvsim.scan import LaserScan
 
-@dataclass(frozen=True)
-class LaserScan:
-    """One scan in ``sensor_msgs/LaserScan`` layout (inf = no return, -inf = too close)."""
 
-    stamp_s: float
-    angle_min_rad: float
-    angle_increment_rad: float
-    range_min_m: float
-    range_max_m: float
-    ranges: np.ndarray  # (B,) m
+class ControlMode(StrEnum):
+    """What a controller commands: a body twist (inverse kinematics computes the wheels) or the
+    wheels themselves (forward kinematics computes the motion), as the thesis lets users pick.
+    A ``StrEnum``: ``mode == "forward"`` holds for ``ControlMode.FORWARD``."""
 
-    @property
-    def hits(self) -> np.ndarray:
-        """(B,) bool: the thesis rangers' hit flag (a return within range)."""
-        return np.isfinite(self.ranges) | (self.ranges == -np.inf)
+    INVERSE = "inverse"
+    FORWARD = "forward"
 
 
 @dataclass(frozen=True)
@@ -44,7 +39,7 @@ class Observation:
 
     t_s: float
     name: str
-    scans: dict[str, LaserScan]
+    scans: dict[str, LaserScan]  # sensor frame + mount pose (agvsim.scan)
     odom_pose: np.ndarray  # (3,) dead-reckoned x, y, theta from wheel encoders
     wheel_speeds: np.ndarray  # (W,) measured rad/s
     bump: bool  # collided during the last step
@@ -52,7 +47,7 @@ class Observation:
     others: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (3,) pose of the
     # robots this one is allowed to know about (the scenario's `knows:`; ground truth)
     model: object = None  # this robot's kinematic model (for command_for / inverse kinematics)
-    mode: str = "inverse"  # "inverse" (commands are twists) or "forward" (wheel speeds)
+    mode: ControlMode = ControlMode.INVERSE  # INVERSE: commands are twists; FORWARD: wheels
     dt_s: float = 0.02  # the kinematics step
 
 
@@ -100,7 +95,7 @@ def command_for(obs: Observation, vx: float, vy: float = 0.0, omega: float = 0.0
     twist itself in inverse mode, or, in forward mode, the driven wheel speeds (+ steering)
     that the robot's own inverse kinematics gives. Behaviours written in twists use this to
     work for every model and both modes."""
-    if obs.mode != "forward":
+    if obs.mode != ControlMode.FORWARD:
         return Twist(float(vx), float(vy), float(omega))
     from agvsim.kinematics.actuation import forward_command
 
@@ -110,7 +105,9 @@ def command_for(obs: Observation, vx: float, vy: float = 0.0, omega: float = 0.0
     return WheelCommand(tuple(float(v) for v in cmd[:n]), float(cmd[n]) if cmd.size > n else 0.0)
 
 
-def command_to_array(cmd: object, width: int, mode: str, name: str, t_s: float) -> np.ndarray:
+def command_to_array(
+    cmd: object, width: int, mode: ControlMode, name: str, t_s: float
+) -> np.ndarray:
     """Normalise a controller's return value to ``width`` floats, with a clear error."""
     if isinstance(cmd, Twist):
         values = [cmd.vx, cmd.vy, cmd.omega]
@@ -124,7 +121,7 @@ def command_to_array(cmd: object, width: int, mode: str, name: str, t_s: float) 
     if values is None or len(values) != width:
         what = (
             "a Twist or (vx, vy, omega)"
-            if mode == "inverse"
+            if mode == ControlMode.INVERSE
             else (
                 f"a WheelCommand or {width} numbers (driven wheel speeds rad/s"
                 + (", then steering rad)" if width else ")")

@@ -32,9 +32,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from agvsim.angles import wrap_angle, wrap_scalar
 from agvsim.control.api import BatchObservation
 from agvsim.control.traffic import RobotSight
-from agvsim.kinematics.base import wrap_angle, wrap_scalar
 
 DRIVE, TURN, REVERSE, BACKOFF = 0, 1, 2, 3
 STATE_NAMES = ("drive", "turn_right", "reverse", "back_off")

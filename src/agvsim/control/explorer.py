@@ -11,6 +11,7 @@ from typing import Literal
 
 import numpy as np
 
+from agvsim.angles import wrap_angle
 from agvsim.control.api import LaserScan, Observation, command_for
 from agvsim.control.mobility import wrap
 
@@ -18,8 +19,8 @@ from agvsim.control.mobility import wrap
 def sector_min(scan: LaserScan, center_rad: float, half_rad: float) -> float:
     """Smallest reading of the beams within +-half_rad of center_rad (robot frame); no return
     counts as range_max + 1, too close as 0. The nearest beam if none falls inside."""
-    ang = scan.angle_min_rad + scan.angle_increment_rad * np.arange(len(scan.ranges))
-    off = np.abs((ang - center_rad + np.pi) % (2 * np.pi) - np.pi)
+    ang = scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(len(scan.ranges))
+    off = np.abs(wrap_angle(ang - center_rad))
     sel = off <= half_rad
     if not sel.any():
         sel = off == off.min()
@@ -94,7 +95,7 @@ class TremauxExplorer:
         hit = np.isfinite(r) | np.isneginf(r)
         if not hit.any():
             return True
-        ang = scan.angle_min_rad + scan.angle_increment_rad * np.flatnonzero(hit) - bearing
+        ang = scan.robot_angle_min_rad + scan.angle_increment_rad * np.flatnonzero(hit) - bearing
         rr = np.where(np.isneginf(r[hit]), 0.0, r[hit])
         along, lateral = rr * np.cos(ang), np.abs(rr * np.sin(ang))
         inside = (along > -0.1) & (along < dist + 0.3) & (lateral < self.half_width + 0.15)

@@ -27,14 +27,15 @@ from typing import Literal
 
 import numpy as np
 
+from agvsim.angles import wrap_scalar
 from agvsim.control.api import Observation
 
 PoseSource = Literal["true_pose", "odometry"]
 
 
 def wrap(a: float) -> float:
-    """Angle in rad wrapped to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+    """Angle in rad wrapped to (-pi, pi] (:func:`agvsim.angles.wrap_scalar`)."""
+    return float(wrap_scalar(a))
 
 
 def pose_of(obs: Observation, source: str) -> np.ndarray:

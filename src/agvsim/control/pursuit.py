@@ -20,13 +20,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from agvsim.angles import wrap_scalar
 from agvsim.control.api import LaserScan, Observation, command_for
-
-
-def _wrap(a: float) -> float:
-    """Angle in rad wrapped to (-pi, pi]."""
-    t = math.pi - ((math.pi - a) % (2.0 * math.pi))
-    return math.pi if t <= -math.pi else t
 
 
 def _clip(v: float, limit: float) -> float:
@@ -54,7 +49,7 @@ def _scan(obs: Observation, sensor: str) -> LaserScan:
 def _readings(scan: LaserScan) -> tuple[np.ndarray, np.ndarray]:
     """(angles rad in the robot frame, ranges m): no return reads range_max, too close 0."""
     ranges = np.nan_to_num(scan.ranges, posinf=scan.range_max_m, neginf=0.0)
-    angles = scan.angle_min_rad + scan.angle_increment_rad * np.arange(len(ranges))
+    angles = scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(len(ranges))
     return angles, ranges
 
 
@@ -87,7 +82,7 @@ class FreeSpace:
         ranges = np.where(scan.ranges == -np.inf, 0.0, scan.ranges)
         n = len(ranges)
         self.mount = (float(mount_xy_m[0]), float(mount_xy_m[1]))
-        self.a0, self.inc = scan.angle_min_rad, scan.angle_increment_rad
+        self.a0, self.inc = scan.robot_angle_min_rad, scan.angle_increment_rad
         self.r_max = scan.range_max_m
         self.full = n > 1 and abs(n * self.inc - 2 * math.pi) < 1e-6
         angles = self.a0 + self.inc * np.arange(n)
@@ -236,7 +231,7 @@ class Pursuer:
     def step(self, obs: Observation):
         x, y, th = obs.true_pose
         tx, ty, _ = _other(obs, self.target, "target")
-        err = _wrap(math.atan2(ty - y, tx - x) - th)
+        err = wrap_scalar(math.atan2(ty - y, tx - x) - th)
         if self._reorienting and abs(err) < 0.5 * self.reorient_rad:
             self._reorienting = False
         elif not self._reorienting and abs(err) > self.reorient_rad:
@@ -319,7 +314,7 @@ class Evader:
             held = int(np.argmin(np.abs(np.angle(np.exp(1j * (world - self._heading))))))
             if score[best] < score[held] + 0.15:  # switch only for a clearly better way out
                 return self._heading
-        return _wrap(float(world[best]))
+        return wrap_scalar(float(world[best]))
 
     def step(self, obs: Observation):
         x, y, th = obs.true_pose
@@ -334,14 +329,14 @@ class Evader:
         else:  # a wall ahead: turn towards the side with more space
             if self._state != "turn" or self._heading is None:
                 more_left = _sector_min(scan, math.pi / 2) >= _sector_min(scan, -math.pi / 2)
-                self._heading = _wrap(th + (math.pi / 2 if more_left else -math.pi / 2))
+                self._heading = wrap_scalar(th + (math.pi / 2 if more_left else -math.pi / 2))
             state, speed = "turn", self.wander_speed
-            if abs(_wrap(self._heading - th)) < 0.1 or front >= 2.0 * self.trigger:
+            if abs(wrap_scalar(self._heading - th)) < 0.1 or front >= 2.0 * self.trigger:
                 state, self._heading = "wander", None
         if self._heading is None:
             vx, omega = speed, 0.0
         else:
-            err = _wrap(self._heading - th)
+            err = wrap_scalar(self._heading - th)
             vx = speed * max(math.cos(err), 0.0) ** 2
             omega = _clip(self.gain * err, self.rate)
         names = dict.fromkeys(n for n in (self.sensor, self.space_sensor) if n in obs.scans)

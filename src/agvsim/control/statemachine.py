@@ -28,13 +28,13 @@ from __future__ import annotations
 
 import copy as _copy
 import difflib
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
 
+from agvsim.angles import wrap_scalar
 from agvsim.control.api import Observation, command_for
 
 Action = Callable[["Context"], Any]
@@ -52,9 +52,8 @@ class ActionError(RuntimeError):
 
 # ------------------------------------------------------------------------------ helpers
 def wrap(angle: float) -> float:
-    """``angle`` in rad wrapped to (-pi, pi] (the convention of ``agvsim.kinematics``)."""
-    a = math.pi - ((math.pi - float(angle)) % (2.0 * math.pi))
-    return math.pi if a <= -math.pi else a
+    """``angle`` in rad wrapped to (-pi, pi] (:func:`agvsim.angles.wrap_scalar`)."""
+    return float(wrap_scalar(float(angle)))
 
 
 def reached(angle: float, target: float, tol: float = 0.01) -> bool:

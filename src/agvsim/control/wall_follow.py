@@ -42,6 +42,7 @@ from typing import Literal
 
 import numpy as np
 
+from agvsim.angles import wrap_scalar
 from agvsim.control.api import LaserScan, Observation, WheelCommand, command_for
 
 
@@ -271,7 +272,7 @@ class WallFollower:
         r = np.hypot(x[on_side], y[on_side])
         k = int(np.argmin(r))
         bearing = math.atan2(y[on_side][k], x[on_side][k])
-        return float(r[k]), _wrap(bearing - self.s * math.pi / 2)
+        return float(r[k]), wrap_scalar(bearing - self.s * math.pi / 2)
 
     def _ranger_wall(self, x: np.ndarray, y: np.ndarray, pose: np.ndarray) -> tuple[float, float]:
         """Rangers: the side beam's return if it has one (square walls: run along the nearest
@@ -283,12 +284,12 @@ class WallFollower:
             px, py = x[side][k] + self.offset, y[side][k]
             self._mark = np.array([pose[0] + c * px - sn * py, pose[1] + sn * px + c * py])
             square = round(pose[2] / (math.pi / 2)) * (math.pi / 2)
-            return float(abs(y[side][k])), _wrap(square - pose[2])
+            return float(abs(y[side][k])), wrap_scalar(square - pose[2])
         if self._mark is None:
             return math.inf, 0.0
         dx, dy = self._mark[0] - pose[0], self._mark[1] - pose[1]
         mx, my = c * dx + sn * dy - self.offset, -sn * dx + c * dy
-        return math.hypot(mx, my), _wrap(math.atan2(my, mx) - self.s * math.pi / 2)
+        return math.hypot(mx, my), wrap_scalar(math.atan2(my, mx) - self.s * math.pi / 2)
 
     # ------------------------------------------------------------------ commanding
     def _model(self, model: object) -> tuple[bool, float]:
@@ -321,15 +322,11 @@ class WallFollower:
         return WheelCommand(tuple(float(w) for w in np.ravel(drive)), target)
 
 
-def _wrap(a: float) -> float:
-    return math.pi - ((math.pi - a) % (2.0 * math.pi))
-
-
 def _returns_xy(scan: LaserScan, mount_xy: tuple[float, float]) -> np.ndarray:
     """(K, 2) points of a scan's returns in the robot (P) frame; -inf (too close) counts as
     a return at range_min."""
     r = np.where(scan.ranges == -np.inf, scan.range_min_m, scan.ranges)
-    a = scan.angle_min_rad + scan.angle_increment_rad * np.arange(r.size)
+    a = scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(r.size)
     ok = np.isfinite(r)
     r, a = r[ok], a[ok]
     return np.column_stack([mount_xy[0] + r * np.cos(a), mount_xy[1] + r * np.sin(a)])

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agvsim.control.api import ControlMode
 from agvsim.fleet.battery import Battery
 from agvsim.fleet.config import Vda5050Config
 from agvsim.fleet.dialect import DIALECTS
@@ -17,7 +18,6 @@ from agvsim.fleet.vehicle import Lidar, Vehicle, VehicleConfig
 from agvsim.scenario import Scenario, ScenarioError, build, build_grid
 from agvsim.scenario_schema import IdleConfig, Pose
 from agvsim.sim.engine import Binding, Simulation
-from agvsim.sim.spec import ControlMode
 from agvsim.world.lif import Layout, LifError, layout_from_grid, load_lif
 
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agvsim.control.api import ControlMode
 from agvsim.kinematics import Tricycle
-from agvsim.sim.spec import ControlMode
 
 
 def twist_limits(model) -> np.ndarray:

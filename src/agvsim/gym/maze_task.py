@@ -35,11 +35,12 @@ from typing import Any
 
 import numpy as np
 
+from agvsim.control.api import ControlMode
 from agvsim.gym.actions import ActionMap, twist_limits
 from agvsim.scenario import ScenarioError, parse_scenario, robot_spec
 from agvsim.scenario_schema import RandomMaze
 from agvsim.sim.engine import Binding, Simulation
-from agvsim.sim.spec import ControlMode, World
+from agvsim.sim.spec import World
 from agvsim.world.grid import OccupancyGrid
 from agvsim.world.mazes import random_maze
 

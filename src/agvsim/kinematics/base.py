@@ -14,21 +14,7 @@ from typing import ClassVar, Protocol, TypeVar
 import numpy as np
 from numba import njit
 
-TWO_PI = 2.0 * np.pi
-
-
-def wrap_angle(a: np.ndarray | float) -> np.ndarray:
-    """Wrap angle(s) in rad to (-pi, pi]."""
-    out = np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), TWO_PI)
-    # np.mod may round a tiny negative remainder up to exactly 2 pi, giving -pi
-    return np.where(out <= -np.pi, np.pi, out)
-
-
-@njit(cache=True, error_model="numpy")
-def wrap_scalar(a: float) -> float:
-    """Wrap one angle in rad to (-pi, pi] (numba kernels' twin of ``wrap_angle``)."""
-    t = math.pi - ((math.pi - a) % TWO_PI)
-    return math.pi if t <= -math.pi else t
+from agvsim.angles import wrap_angle, wrap_scalar
 
 
 @njit(cache=True, error_model="numpy")

@@ -20,6 +20,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 from scipy import ndimage
 
+from agvsim.angles import wrap_scalar
 from agvsim.world.grid import OccupancyGrid
 
 
@@ -76,7 +77,7 @@ class CorridorCoverage:
         if away > self.leave_radius_m:
             self.left = True
         elif self.left and self.return_time_s is None and away <= self.return_radius_m:
-            turn = abs(math.remainder(float(st.poses[i, 2]) - self.start_heading, 2 * math.pi))
+            turn = abs(wrap_scalar(float(st.poses[i, 2]) - self.start_heading))
             if self.heading_tol is None or turn <= self.heading_tol:
                 self.return_time_s = float(st.t_s)
         return self.stop_on_return and self.return_time_s is not None
@@ -142,7 +143,9 @@ class CorridorCoverage:
         mx, my = spec.mount_xy_m
         ox = x + math.cos(th) * mx - math.sin(th) * my
         oy = y + math.sin(th) * mx + math.cos(th) * my
-        angles = th + scan.angle_min_rad + scan.angle_increment_rad * np.arange(scan.ranges.size)
+        angles = (
+            th + scan.robot_angle_min_rad + scan.angle_increment_rad * np.arange(scan.ranges.size)
+        )
         r = scan.ranges
         length = np.where(np.isfinite(r), r, np.where(r > 0, scan.range_max_m, scan.range_min_m))
         gx, gy = self.grid.origin_xy_m

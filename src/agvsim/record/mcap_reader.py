@@ -2,7 +2,7 @@
 
     rec = Recording("runs/x/run.mcap")
     t, poses, twists = rec.odometry("/differential/ground_truth")   # (T,), (T, 3), (T, 3)
-    scans = rec.laser_scans("/differential/lidar")                  # ScanSeries
+    scans = rec.laser_scans("/differential/lidar")                  # ScanSeries (T scans)
     grids = rec.occupancy("/map")                                   # [GridMessage]
 
 A file cut off in the middle of a write (the machine died) has no footer; it is repaired into
@@ -26,6 +26,7 @@ import numpy as np
 
 from agvsim.record.mcap_file import repair, scan_records
 from agvsim.record.ros2msg import LASER_SCAN, OCCUPANCY_GRID, ODOMETRY, STRING, topic_name
+from agvsim.scan import LaserScan
 
 __all__ = ["GridMessage", "Recording", "RecordingError", "ScanSeries"]
 
@@ -59,19 +60,37 @@ def _reading(method: _F) -> _F:
 
 @dataclass(frozen=True)
 class ScanSeries:
-    """Every message of one ``sensor_msgs/LaserScan`` topic (one sensor)."""
+    """Every message of one ``sensor_msgs/LaserScan`` topic (one sensor): the batch form of
+    :class:`agvsim.scan.LaserScan`, with its field names; ``scan(k)`` is the k-th scan."""
 
     frame_id: str
-    t_s: np.ndarray  # (T,) header stamps
+    stamp_s: np.ndarray  # (T,) header stamps
     ranges: np.ndarray  # (T, B) float64 (float32 values), inf / -inf kept
-    angle_min_rad: float
+    angle_min_rad: float  # sensor frame
     angle_increment_rad: float
     range_min_m: float
     range_max_m: float
+    mount_pose: np.ndarray  # (3,) x, y, yaw of the sensor on the robot (/tf_static; 0 if absent)
+
+    def __len__(self) -> int:
+        return len(self.stamp_s)
 
     @property
     def angles_rad(self) -> np.ndarray:
+        """(B,) beam directions in the sensor frame."""
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.ranges.shape[1])
+
+    def scan(self, k: int) -> LaserScan:
+        """The k-th scan (its ranges a copy)."""
+        return LaserScan(
+            float(self.stamp_s[k]),
+            self.angle_min_rad,
+            self.angle_increment_rad,
+            self.range_min_m,
+            self.range_max_m,
+            self.ranges[k].copy(),
+            self.mount_pose.copy(),
+        )
 
 
 @dataclass(frozen=True)
@@ -152,8 +171,9 @@ class Recording:
         return len(self._raw.get(topic, ()))
 
     @_reading
-    def messages(self, topic: str, type_name: str | None = None) -> list[tuple[float, object]]:
-        """(log time s, decoded message) of every message on ``topic``."""
+    def messages(self, topic: str, type_name: str | None = None) -> list[tuple[float, Any]]:
+        """(log time s, decoded message) of every message on ``topic`` (rosbags' message
+        classes, made from the recording's own definitions: typed ``Any`` here)."""
         if topic not in self.types:
             raise RecordingError(
                 f"{self.path}: no topic {topic!r}; topics: {', '.join(self.topics)}"
@@ -161,8 +181,11 @@ class Recording:
         typ = self.types[topic]
         if type_name is not None and typ != type_name:
             raise RecordingError(f"{self.path}: {topic} holds {typ}, not {type_name}")
-        des = self._store.deserialize_cdr
-        return [(t * 1e-9, des(raw, typ)) for t, raw in self._raw[topic]]
+        return [(t * 1e-9, self._decode(raw, typ)) for t, raw in self._raw[topic]]
+
+    def _decode(self, raw: bytes, type_name: str) -> Any:
+        """One CDR message as rosbags' class of ``type_name`` (a dataclass made at run time)."""
+        return self._store.deserialize_cdr(raw, type_name)
 
     def topics_of_type(self, type_name: str) -> list[str]:
         return [t for t in self.topics if self.types[t] == type_name]
@@ -218,7 +241,7 @@ class Recording:
             if topic in self.types:
                 raise RecordingError(f"{self.path}: {topic} holds no scans")
             self.messages(topic)  # raises: no such topic
-        first = self._store.deserialize_cdr(self._raw[topic][0][1], LASER_SCAN)
+        first = self._decode(self._raw[topic][0][1], LASER_SCAN)
         if self.types[topic] != LASER_SCAN:
             raise RecordingError(f"{self.path}: {topic} holds {self.types[topic]}, not scans")
         n = len(first.ranges)
@@ -238,14 +261,16 @@ class Recording:
                 )
             t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in msgs])
             ranges = np.array([m.ranges for _, m in msgs], dtype=np.float64).reshape(-1, n)
+        mount = self.static_transforms().get(first.header.frame_id)
         return ScanSeries(
             frame_id=first.header.frame_id,
-            t_s=t,
+            stamp_s=t,
             ranges=ranges,
             angle_min_rad=float(first.angle_min),
             angle_increment_rad=float(first.angle_increment),
             range_min_m=float(first.range_min),
             range_max_m=float(first.range_max),
+            mount_pose=np.array(mount[1:] if mount is not None else (0.0, 0.0, 0.0)),
         )
 
     @_reading
@@ -346,4 +371,4 @@ class Recording:
     @_reading
     def _beams(self, topic: str) -> int:
         t_ns, raw = self._raw[topic][0]
-        return len(self._store.deserialize_cdr(raw, LASER_SCAN).ranges)
+        return len(self._decode(raw, LASER_SCAN).ranges)

@@ -60,7 +60,9 @@ def odom_twists(p0: np.ndarray, p1: np.ndarray, dt_s: float) -> np.ndarray:
     c, s = np.cos(p0[:, 2]), np.sin(p0[:, 2])
     d = p1 - p0
     rx, ry = c * d[:, 0] + s * d[:, 1], c * d[:, 1] - s * d[:, 0]  # in the frame of p0
-    a = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi  # the wrapped turn
+    # the wrapped turn, in [-pi, pi): the one formula not agvsim.angles.wrap_angle, because the
+    # recorded /odom twists were written with its rounding (the other differs in the last bit)
+    a = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
     # V(a)^-1 (rx, ry) with V = [[sin a / a, -(1 - cos a) / a], [(1 - cos a) / a, sin a / a]]:
     # (a / 2) [[cot(a / 2), 1], [-1, cot(a / 2)]] (rx, ry); a -> 0 gives (rx, ry)
     h = 0.5 * a
@@ -276,8 +278,7 @@ class Recorder:
         t_ns = _ns(t_s)
         self._recorded_s = t_s
         if sim.world.grid is not self._grid:
-            self._grid = sim.world.grid
-            g = self._grid
+            self._grid = g = sim.world.grid
             self.write_occupancy("/map", t_s, _grid_cells_ros(g.occupied), g.resolution_m,
                                  g.origin_xy_m, trinary=True)  # fmt: skip
         if t_s >= self._next_pose_s - 1e-9:

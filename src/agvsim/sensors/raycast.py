@@ -39,6 +39,7 @@ import time
 import numpy as np
 from numba import njit, prange
 
+from agvsim.angles import wrap_scalar
 from agvsim.geometry import bin_window, box_tables, build_center_bins, ray_box, snap_axis
 from agvsim.sensors.grid_dda import (  # JUMP, OUTSIDE: re-exported for older imports
     JUMP,  # noqa: F401
@@ -80,7 +81,7 @@ def beam_directions(angles: np.ndarray, dirs: np.ndarray) -> tuple[int, bool, fl
     if uniform:
         for k in range(n):
             e = angles[k] - (angles[0] + k * step)
-            e -= _TWO_PI * math.floor(e / _TWO_PI + 0.5)
+            e = wrap_scalar(e)
             if not abs(e) <= _UNIFORM_TOL:
                 uniform = False
                 break

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agvsim.kinematics.base import wrap_angle
+from agvsim.angles import wrap_angle
 
 REFLECTOR_INTENSITY = 1000.0
 DIFFUSE_INTENSITY = 100.0  # at 1 m; falls with 1 / r^2, capped at this

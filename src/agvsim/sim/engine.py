@@ -24,6 +24,7 @@ import numpy as np
 from agvsim.control.api import (
     BatchController,
     BatchObservation,
+    ControlMode,
     LaserScan,
     Observation,
     Twist,
@@ -41,7 +42,7 @@ from agvsim.sensors.raycast import RayCaster
 from agvsim.sim import observe
 from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.kernels import move_bodies, pair_faults
-from agvsim.sim.spec import ControlMode, RobotSpec, World
+from agvsim.sim.spec import RobotSpec, World
 from agvsim.sim.state import ROBOT_ROWS, SensorTable, SimState  # noqa: F401 - in hints
 from agvsim.sim.watchdog import ControllerClock, TimeLimitExceeded, check_limit
 from agvsim.world.grid import OccupancyGrid
@@ -469,7 +470,7 @@ class Simulation:
             else isinstance(cmd, Twist)
         )
         width = 3 if is_twist else self.cmd_width(i)
-        mode = "inverse" if is_twist else "forward"
+        mode = ControlMode.INVERSE if is_twist else ControlMode.FORWARD
         if arr is None:
             arr = command_to_array(cmd, width, mode, robot.name, self.state.t_s)
         arr = arr[:width]

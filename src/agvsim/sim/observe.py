@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from agvsim.control.api import BatchObservation, LaserScan, Observation
+from agvsim.control.api import BatchObservation, ControlMode, Observation
+from agvsim.scan import LaserScan
 from agvsim.sim.state import SensorTable
 
 if TYPE_CHECKING:
@@ -24,11 +25,12 @@ def scan(sim: Simulation, slot: int) -> LaserScan:
     spec = tab.specs[slot]
     return LaserScan(
         float(st.scan_stamp[slot]),
-        spec.angle_min_rad + spec.mount_yaw_rad,
+        spec.angle_min_rad,
         spec.angle_increment_rad,
         spec.range_min_m,
         spec.range_max_m,
         st.scans[slot, : spec.num_beams].copy(),
+        np.array((*spec.mount_xy_m, spec.mount_yaw_rad), dtype=np.float64),
     )
 
 
@@ -68,7 +70,7 @@ def observation(sim: Simulation, i: int) -> Observation:
         true_pose=st.poses[i].copy(),
         others={sim.robots[j].name: st.poses[j].copy() for j in sim.knows[i]},
         model=robot.model,
-        mode=str(robot.mode),
+        mode=ControlMode(robot.mode),
         dt_s=sim.dt_s,
         images=images,
         depth=depth,

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import StrEnum
 
 import numpy as np
 
+from agvsim.control.api import ControlMode
 from agvsim.dynamics.spec import DynamicsSpec, FloorFriction
 from agvsim.kinematics.base import KinematicModel
 from agvsim.sensors.camera import CameraSpec
@@ -20,14 +20,6 @@ from agvsim.world.markers import Appearance
 WALL_HEIGHT_M = 1.0
 BOX_HEIGHT_M = 1.0
 BODY_HEIGHT_M = 0.25
-
-
-class ControlMode(StrEnum):
-    """What a controller commands: a body twist (inverse kinematics computes the wheels) or the
-    wheels themselves (forward kinematics computes the motion), as the thesis lets users pick."""
-
-    INVERSE = "inverse"
-    FORWARD = "forward"
 
 
 @dataclass(frozen=True)

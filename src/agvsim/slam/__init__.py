@@ -46,7 +46,8 @@ __all__ = [
 ]
 
 # front end: log reading, scan matching, submaps, loop closure, the online SLAM, offline runs
-from agvsim.slam.carmen import CarmenFormatError, CarmenLog, ScanRecord, read_carmen  # noqa: E402
+from agvsim.scan import LaserScan  # noqa: E402
+from agvsim.slam.carmen import CarmenFormatError, CarmenLog, read_carmen  # noqa: E402
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig  # noqa: E402
 from agvsim.slam.mapping import OccupancyMap  # noqa: E402
 from agvsim.slam.offline import OfflineResult, run_offline  # noqa: E402
@@ -55,9 +56,9 @@ __all__ += [
     "CarmenFormatError",
     "CarmenLog",
     "GraphSlam",
+    "LaserScan",
     "OccupancyMap",
     "OfflineResult",
-    "ScanRecord",
     "SlamConfig",
     "read_carmen",
     "run_offline",

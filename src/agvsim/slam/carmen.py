@@ -15,9 +15,11 @@ Kümmerle relations use). Understood messages:
   n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv ...`` -- carries
   its own geometry: beam ``k`` at ``start_angle + k * angular_res``.
 
-``PARAM``, ``RAWLASER1..4``, ``#`` comments, blank lines and other messages are skipped. The laser
-offset is ``T_robot_laser = T_odom_robot^-1 * T_odom_laser``. A malformed line raises
-:class:`CarmenFormatError` naming the file, line number, message and problem.
+``PARAM``, ``RAWLASER1..4``, ``#`` comments, blank lines and other messages are skipped. A scan
+is an :class:`agvsim.scan.LaserScan` in the laser frame: its mount pose is
+``T_robot_laser = T_odom_robot^-1 * T_odom_laser``, its ``odom_pose`` the robot's pose. A
+malformed line raises :class:`CarmenFormatError` naming the file, line number, message and
+problem.
 """
 
 from __future__ import annotations
@@ -33,12 +35,14 @@ from typing import IO
 import numpy as np
 from numpy.typing import NDArray
 
+from agvsim.angles import wrap_scalar
+from agvsim.scan import LaserScan
+
 __all__ = [
     "CarmenFormatError",
     "CarmenLog",
     "CarmenTruncated",
     "OdomRecord",
-    "ScanRecord",
     "carmen_angles",
     "read_carmen",
 ]
@@ -55,37 +59,27 @@ class CarmenFormatError(ValueError):
 
 
 @dataclass(frozen=True)
-class ScanRecord:
-    """One laser scan with the odometry at its time stamp."""
-
-    timestamp_s: float  # ipc_timestamp
-    ranges_m: NDArray[np.float64]  # (n,) inf where there is no return
-    angles_rad: NDArray[np.float64]  # (n,) beam directions in the laser frame
-    max_range_m: float  # the sensor's maximum reading
-    odom_pose: NDArray[np.float64]  # (3,) x, y, theta: robot base pose in the odometry frame
-    laser_offset: NDArray[np.float64]  # (3,) T_robot_laser
-
-
-@dataclass(frozen=True)
 class OdomRecord:
     """An ``ODOM`` message: robot base pose in the odometry frame and its velocities."""
 
-    timestamp_s: float
+    stamp_s: float  # ipc_timestamp
     pose: NDArray[np.float64]  # (3,)
     tv_mps: float
     rv_radps: float
 
 
+def _flaser_step(n_beams: int) -> float:
+    if n_beams in (180, 181):
+        return math.radians(1.0)
+    if n_beams in (360, 361):
+        return math.radians(0.5)
+    return math.pi / max(n_beams - 1, 1)
+
+
 def carmen_angles(n_beams: int) -> NDArray[np.float64]:
     """FLASER beam angles (rad): from -pi/2, 1 deg apart for 180/181 beams, 0.5 deg for 360/361,
     otherwise ``n`` beams spread evenly over pi."""
-    if n_beams in (180, 181):
-        step = math.radians(1.0)
-    elif n_beams in (360, 361):
-        step = math.radians(0.5)
-    else:
-        step = math.pi / max(n_beams - 1, 1)
-    return -0.5 * math.pi + step * np.arange(n_beams, dtype=np.float64)
+    return -0.5 * math.pi + _flaser_step(n_beams) * np.arange(n_beams, dtype=np.float64)
 
 
 def _open(path: Path) -> IO[str]:
@@ -126,7 +120,7 @@ def _relative(robot: NDArray[np.float64], laser: NDArray[np.float64]) -> NDArray
     """``robot^-1 * laser`` for single poses."""
     c, s = math.cos(robot[2]), math.sin(robot[2])
     dx, dy = laser[0] - robot[0], laser[1] - robot[1]
-    dth = math.remainder(laser[2] - robot[2], 2.0 * math.pi)
+    dth = wrap_scalar(laser[2] - robot[2])
     return np.array([c * dx + s * dy, -s * dx + c * dy, dth])
 
 
@@ -212,23 +206,25 @@ def _parse_odom(f: _Line) -> OdomRecord:
     return OdomRecord(f.timestamp(), np.array([x, y, th]), float(tv), float(rv))
 
 
-def _parse_flaser(f: _Line, max_range_m: float) -> ScanRecord:
+def _parse_flaser(f: _Line, max_range_m: float) -> LaserScan:
     n = f.count("num_readings")
     ranges = f.floats(n, f"{n} range readings")
     laser = f.floats(3, "laser pose x y theta")
     robot = f.floats(3, "odometry pose x y theta")
     stamp = f.timestamp()
-    return ScanRecord(
+    return LaserScan(
         stamp,
-        _no_return(ranges, max_range_m),
-        carmen_angles(n),
+        -0.5 * math.pi,
+        _flaser_step(n),
+        0.0,
         max_range_m,
-        robot,
+        _no_return(ranges, max_range_m),
         _relative(robot, laser),
+        robot,
     )
 
 
-def _parse_robotlaser(f: _Line) -> ScanRecord:
+def _parse_robotlaser(f: _Line) -> LaserScan:
     _, start, fov, res, max_range = f.floats(5, "laser_type start_angle fov angular_res max_range")
     f.floats(2, "accuracy remission_mode")
     if max_range <= 0 or res == 0:
@@ -239,20 +235,21 @@ def _parse_robotlaser(f: _Line) -> ScanRecord:
     laser = f.floats(3, "laser pose x y theta")
     robot = f.floats(3, "robot pose x y theta")
     stamp = f.timestamp()
-    angles = start + res * np.arange(n, dtype=np.float64)
-    return ScanRecord(
+    return LaserScan(
         stamp,
-        _no_return(ranges, max_range),
-        angles,
+        float(start),
+        float(res),
+        0.0,
         float(max_range),
-        robot,
+        _no_return(ranges, max_range),
         _relative(robot, laser),
+        robot,
     )
 
 
 def read_carmen(
     path: str | Path, max_range_m: float | None = None, with_odom: bool = False
-) -> Iterator[ScanRecord | OdomRecord]:
+) -> Iterator[LaserScan | OdomRecord]:
     """Yield the scans (and, with ``with_odom``, the ``ODOM`` messages) of a CARMEN log in order.
 
     ``max_range_m`` is the FLASER no-return value; by default the largest FLASER reading in the
@@ -283,9 +280,9 @@ def read_carmen(
 
 
 class CarmenLog:
-    """A CARMEN log as a sized iterable of :class:`ScanRecord` (one survey pass at open: the
-    number of scans and the FLASER no-return value). A ``.gz`` log cut off before its end is
-    read up to the cut; ``truncated_after_line`` then says where (None otherwise)."""
+    """A CARMEN log as a sized iterable of :class:`~agvsim.scan.LaserScan` (one survey pass at
+    open: the number of scans and the FLASER no-return value). A ``.gz`` log cut off before its
+    end is read up to the cut; ``truncated_after_line`` then says where (None otherwise)."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -297,10 +294,10 @@ class CarmenLog:
     def __len__(self) -> int:
         return self._count
 
-    def __iter__(self) -> Iterator[ScanRecord]:
+    def __iter__(self) -> Iterator[LaserScan]:
         try:
             for rec in read_carmen(self.path, self.flaser_max_range_m or None):
-                if isinstance(rec, ScanRecord):
+                if isinstance(rec, LaserScan):
                     yield rec
         except CarmenTruncated as cut:
             self.truncated_after_line = cut.line_no

@@ -8,6 +8,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from agvsim.angles import wrap_scalar
 from agvsim.slam.se2 import between
 
 __all__ = ["OdometryFusion"]
@@ -56,7 +57,7 @@ class OdometryFusion:
         increment ``step`` (3,): its physics, not what the run showed (:class:`TrackingConfig`
         ``odom_floor_*``). Regular motion between sparse scans can make the learnt spread
         vanish; scans must still correct odometry in proportion to how far it drove."""
-        dist, turn = math.hypot(step[0], step[1]), abs(_wrap(step[2]))
+        dist, turn = math.hypot(step[0], step[1]), abs(wrap_scalar(step[2]))
         f_m, f_rr, f_rm = self.floors
         return (f_m * dist) ** 2, (f_rr * turn + f_rm * dist) ** 2
 
@@ -93,7 +94,7 @@ class OdometryFusion:
         d *= s_o / (s_o + s_m * ref / np.maximum(w, 1e-9 * ref + 1e-12))
         out = guess.copy()
         out[:2] = guess[:2] + v @ d
-        out[2] = guess[2] + k_rot * _wrap(match[2] - guess[2])
+        out[2] = guess[2] + k_rot * wrap_scalar(match[2] - guess[2])
         return out
 
     def ready(self) -> bool:
@@ -148,10 +149,6 @@ class OdometryFusion:
             out.append((s_o, s_m))
         (so_t, sm_t), (so_r, sm_r) = out
         return so_t, sm_t, so_r / (so_r + sm_r), so_r
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _spread(m: F64, o: F64, lag: int) -> tuple[float, float]:

@@ -1,8 +1,10 @@
 """Offline SLAM over a recorded log: :func:`run_offline`.
 
-Reads a log through a :class:`ScanLog` (a sized iterable of :class:`~.carmen.ScanRecord`; the
-:data:`READERS` registry maps file name endings to readers: CARMEN ``.clf``/``.clf.gz`` today,
-our own recordings can be added next to it), runs :class:`~.graph_slam.GraphSlam` and writes
+Reads a log through a :class:`ScanLog` (a sized iterable of :class:`~agvsim.scan.LaserScan`
+with their ``odom_pose``; the
+:data:`READERS` registry maps file name endings to readers: CARMEN ``.clf``/``.clf.gz``; agvsim's
+own recordings are read by :mod:`agvsim.record.scan_log`, in the layer above, whose
+``open_scan_log`` also opens these), runs :class:`~.graph_slam.GraphSlam` and writes
 
 * ``trajectory.txt``: ``timestamp x y theta`` per scan, robot base pose (m, m, rad);
 * ``map.pgm`` + ``map.yaml`` (ROS ``map_server``) and ``map.png``.
@@ -11,17 +13,17 @@ our own recordings can be added next to it), runs :class:`~.graph_slam.GraphSlam
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
-from agvsim.slam.carmen import CarmenLog, ScanRecord
+from agvsim.scan import LaserScan
+from agvsim.slam.carmen import CarmenLog
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.mapping import save_map_png, save_ros_map
-from agvsim.slam.recording import McapScanLog
 
 __all__ = [
     "READERS",
@@ -37,34 +39,29 @@ __all__ = [
 class ScanLog(Protocol):
     """What :func:`run_offline` reads: the number of scans and the scans in time order."""
 
+    path: Path  # the file, for messages
+
     def __len__(self) -> int: ...
 
-    def __iter__(self) -> Iterator[ScanRecord]: ...
+    def __iter__(self) -> Iterator[LaserScan]: ...
 
 
 READERS: dict[str, Callable[[Path], ScanLog]] = {
     ".clf": CarmenLog,
     ".clf.gz": CarmenLog,
-    ".mcap": McapScanLog,  # agvsim's own recordings (run.mcap), agvsim.slam.recording
 }
 
 
-def open_log(path: str | Path, robot: str | None = None, sensor: str | None = None) -> ScanLog:
-    """The reader registered for the file's ending (:data:`READERS`). ``robot`` and ``sensor``
-    pick the scans of a recording of several (agvsim's ``.mcap``); other logs hold one laser."""
+def open_log(
+    path: str | Path, readers: Mapping[str, Callable[[Path], ScanLog]] = READERS
+) -> ScanLog:
+    """The reader ``readers`` (default :data:`READERS`) registers for the file's ending."""
     p = Path(path)
     name = p.name.lower()
-    if name.endswith(".mcap"):
-        return McapScanLog(p, robot, sensor)
-    if robot is not None or sensor is not None:
-        raise ValueError(
-            f"{p}: --robot and --sensor pick the scans of an agvsim recording (.mcap); "
-            "this log holds one laser"
-        )
-    for ending, reader in READERS.items():
+    for ending, reader in readers.items():
         if name.endswith(ending):
             return reader(p)
-    known = ", ".join(READERS)
+    known = ", ".join(readers)
     raise ValueError(f"{p}: unknown log format; expected a file ending in one of {known}")
 
 
@@ -97,7 +94,7 @@ def write_trajectory(path: Path, timestamps: np.ndarray, poses: np.ndarray) -> P
 
 
 def map_scans(
-    scans: Iterable[ScanRecord],
+    scans: Iterable[LaserScan],
     config: SlamConfig | None = None,
     progress: Callable[[int], None] | None = None,
     max_scans: int | None = None,
@@ -109,9 +106,11 @@ def map_scans(
     for rec in scans:
         if max_scans is not None and n >= max_scans:
             break
+        if rec.odom_pose is None:
+            raise ValueError(f"the scan at {rec.stamp_s} s has no odometry pose (odom_pose)")
         if slam is None:
-            slam = GraphSlam(rec.max_range_m, rec.laser_offset, config)
-        slam.update(rec.timestamp_s, rec.ranges_m, rec.angles_rad, rec.odom_pose)
+            slam = GraphSlam(rec.range_max_m, rec.mount_pose, config)
+        slam.update(rec.stamp_s, rec.ranges, rec.angles_rad, rec.odom_pose)
         n += 1
         if progress is not None and n % 100 == 0:
             progress(n)
@@ -121,20 +120,20 @@ def map_scans(
 
 
 def run_offline(
-    log_path: str | Path,
+    log_path: str | Path | ScanLog,
     out_dir: str | Path,
     config: SlamConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
     max_scans: int | None = None,
-    robot: str | None = None,
-    sensor: str | None = None,
 ) -> OfflineResult:
     """Run SLAM over a log and write ``trajectory.txt``, ``map.pgm``, ``map.yaml``, ``map.png``
-    into ``out_dir`` (created). ``progress(done, total)`` is called every 100 scans and at the
-    end; ``max_scans`` stops early (a slice of the log); ``robot`` / ``sensor`` pick the lidar
-    of an agvsim recording (default: the first robot with one)."""
+    into ``out_dir`` (created). ``log_path`` is a file :func:`open_log` reads, or a log already
+    open (e.g. ``agvsim.record.scan_log.open_scan_log(path, robot, sensor)`` for a recording).
+    ``progress(done, total)`` is called every 100 scans and at the end; ``max_scans`` stops
+    early (a slice of the log)."""
     t0 = time.perf_counter()
-    log = open_log(log_path, robot, sensor)
+    log = open_log(log_path) if isinstance(log_path, str | Path) else log_path
+    source = log_path if isinstance(log_path, str | Path) else log.path
     total = len(log) if max_scans is None else min(len(log), max_scans)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -142,7 +141,7 @@ def run_offline(
         log, config, None if progress is None else lambda done: progress(done, total), total
     )
     if slam is None:
-        raise ValueError(f"{log_path}: the log holds no laser scans")
+        raise ValueError(f"{source}: the log holds no laser scans")
     n = len(slam.scan_times)
     stamps, poses = slam.trajectory()
     traj = write_trajectory(out / "trajectory.txt", stamps, poses)

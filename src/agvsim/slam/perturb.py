@@ -1,6 +1,6 @@
 """Faults a real robot's log may carry, applied to a stream of scans (robustness suite).
 
-Each :class:`Fault` turns a stream of :class:`~.carmen.ScanRecord` into another, lazily
+Each :class:`Fault` turns a stream of :class:`~agvsim.scan.LaserScan` into another, lazily
 (a log is never held in memory), with the randomness from a ``numpy.random.Generator``:
 
 * ``freeze``: odometry stops changing for 2 to 10 scans (a stalled encoder message), then
@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from agvsim.slam.carmen import ScanRecord
+from agvsim.scan import LaserScan
 from agvsim.slam.se2 import between, compose
 
 __all__ = ["Fault", "FaultConfig", "apply_fault"]
@@ -71,11 +71,11 @@ class FaultConfig:
 
 
 def apply_fault(
-    scans: Iterable[ScanRecord],
+    scans: Iterable[LaserScan],
     fault: Fault | str,
     rng: np.random.Generator,
     cfg: FaultConfig | None = None,
-) -> Iterator[ScanRecord]:
+) -> Iterator[LaserScan]:
     """The scans with ``fault`` applied (see the module docstring)."""
     kind = Fault(fault)
     c = cfg or FaultConfig()
@@ -84,8 +84,8 @@ def apply_fault(
     elif kind is Fault.THIN:
         last = -math.inf
         for rec in scans:
-            if rec.timestamp_s - last >= 1.0 / c.thin_rate_hz:
-                last = rec.timestamp_s
+            if rec.stamp_s - last >= 1.0 / c.thin_rate_hz:
+                last = rec.stamp_s
                 yield rec
     elif kind is Fault.DROP:
         for rec in scans:
@@ -93,24 +93,24 @@ def apply_fault(
                 yield rec
     elif kind is Fault.RANGE_NOISE:
         for rec in scans:
-            r = rec.ranges_m
+            r = rec.ranges
             noisy = r + rng.normal(0.0, c.range_noise_m, r.shape)
-            noisy = np.where(np.isfinite(r), np.clip(noisy, 0.0, rec.max_range_m * 0.999), r)
-            yield replace(rec, ranges_m=noisy)
+            noisy = np.where(np.isfinite(r), np.clip(noisy, 0.0, rec.range_max_m * 0.999), r)
+            yield replace(rec, ranges=noisy)
     else:
         yield from _odometry_fault(scans, kind, rng, c)
 
 
 def _odometry_fault(
-    scans: Iterable[ScanRecord], kind: Fault, rng: np.random.Generator, c: FaultConfig
-) -> Iterator[ScanRecord]:
+    scans: Iterable[LaserScan], kind: Fault, rng: np.random.Generator, c: FaultConfig
+) -> Iterator[LaserScan]:
     prev_true: np.ndarray | None = None
     prev_time = 0.0
     pose = np.zeros(3)  # the faulty odometry as it would have run on (no freeze)
     frozen_left = 0
     last_out = np.zeros(3)
     for rec in scans:
-        true = rec.odom_pose
+        true = _odometry(rec)
         if prev_true is None:
             pose = true.copy()
         else:
@@ -118,10 +118,10 @@ def _odometry_fault(
             if kind is Fault.SCALE:
                 u = np.array([u[0] * c.odometry_scale, u[1] * c.odometry_scale, u[2]])
             elif kind is Fault.HEADING_BIAS:
-                dt_s = rec.timestamp_s - prev_time
+                dt_s = rec.stamp_s - prev_time
                 u = u + np.array([0.0, 0.0, c.heading_bias_rad_per_s * dt_s])
             pose = compose(pose, u)
-        prev_true, prev_time = true, rec.timestamp_s
+        prev_true, prev_time = true, rec.stamp_s
         out = pose
         if kind is Fault.FREEZE:
             if frozen_left == 0 and rng.random() < 1.0 / c.freeze_every_scans:
@@ -131,3 +131,9 @@ def _odometry_fault(
                 frozen_left -= 1
         last_out = np.asarray(out, np.float64).copy()
         yield replace(rec, odom_pose=last_out.copy())
+
+
+def _odometry(scan: LaserScan) -> np.ndarray:
+    if scan.odom_pose is None:
+        raise ValueError(f"the scan at {scan.stamp_s} s has no odometry pose")
+    return scan.odom_pose

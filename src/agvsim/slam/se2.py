@@ -13,7 +13,8 @@ With ``R(theta) = [[cos, -sin], [sin, cos]]`` and ``t = (x, y)``:
 ``between(T_world_a, T_world_b)`` is ``T_a_b``: pose b expressed in the frame of a (the g2o
 ``EDGE_SE2`` measurement and the Kümmerle relation ``pose(t1)^-1 * pose(t2)``).
 
-This module imports numpy only, so every SLAM stage can share it.
+This module imports numpy and :mod:`agvsim.angles` (the one angle wrap) only, so every SLAM
+stage can share it.
 """
 
 from __future__ import annotations
@@ -21,16 +22,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-TWO_PI = 2.0 * np.pi
+from agvsim.angles import wrap_angle
 
 __all__ = ["between", "compose", "inverse", "rotation_matrices", "wrap_angle"]
-
-
-def wrap_angle(angle_rad: ArrayLike) -> NDArray[np.float64]:
-    """Wrap angle(s) in rad to (-pi, pi]: ``pi - mod(pi - a, 2 pi)``."""
-    out = np.pi - np.mod(np.pi - np.asarray(angle_rad, dtype=np.float64), TWO_PI)
-    # np.mod may round a tiny negative remainder up to exactly 2 pi, giving -pi
-    return np.asarray(np.where(out <= -np.pi, np.pi, out), dtype=np.float64)
 
 
 def _as_poses(p: ArrayLike, name: str) -> NDArray[np.float64]:

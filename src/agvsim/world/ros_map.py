@@ -1,9 +1,10 @@
 """Read and write ROS ``map_server`` maps: a YAML file naming an image, its resolution and origin.
 
-Part of the map readers of :mod:`agvsim.world.loaders` (which re-exports :func:`load_ros_map` and
-:func:`save_ros_map`, and whose :func:`~agvsim.world.loaders.load_map` reads ``.yaml``/``.yml``
-files with :func:`load_ros_map`); bad input raises the same
-:class:`~agvsim.world.loaders.MapFormatError`. PyYAML and Pillow are imported only when called.
+Part of the map readers: :mod:`agvsim.world.loaders` re-exports :func:`load_ros_map` and
+:func:`save_ros_map`, and its :func:`~agvsim.world.loaders.load_map` reads ``.yaml``/``.yml``
+files with :func:`load_ros_map`. Bad input raises the same
+:class:`~agvsim.world.map_io.MapFormatError`. This module imports :mod:`agvsim.world.map_io`
+only, never the loaders. PyYAML and Pillow are imported only when called.
 """
 
 from __future__ import annotations
@@ -16,17 +17,17 @@ from typing import Any
 import numpy as np
 
 from agvsim.world.grid import OccupancyGrid
-from agvsim.world.loaders import (
-    ROS_EXTENSIONS,
-    _err,
-    _fraction,
-    _is_real,
-    _make_grid,
-    _read_grey,
-    _require_file,
-    _save_grey,
+from agvsim.world.map_io import (
+    fraction,
+    is_real,
+    make_grid,
+    map_error,
+    read_grey,
+    require_file,
+    save_grey,
 )
 
+ROS_EXTENSIONS = (".yaml", ".yml")
 ROS_REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
 ROS_MODES = ("trinary", "scale", "raw")
 _ROS_FREE_PIXEL = 254  # what map_saver writes (occupied 0, unknown would be 205)
@@ -37,7 +38,7 @@ def _ros_key(doc: dict[str, Any], key: str, source: str) -> Any:
     if key not in doc:
         close = difflib.get_close_matches(key, [str(k) for k in doc], n=1)
         hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise _err(source, f"key '{key}'", f"missing{hint}", _A_ROS)
+        raise map_error(source, f"key '{key}'", f"missing{hint}", _A_ROS)
     return doc[key]
 
 
@@ -47,8 +48,8 @@ def _ros_number(value: Any, source: str, key: str, allowed: str) -> float:
             value = float(value)  # yaml-cpp reads '1e-05' as a number; PyYAML as a string
         except ValueError:
             pass
-    if not (_is_real(value) and math.isfinite(value)):
-        raise _err(source, f"key '{key}'", f"{value!r} is not allowed", allowed)
+    if not (is_real(value) and math.isfinite(value)):
+        raise map_error(source, f"key '{key}'", f"{value!r} is not allowed", allowed)
     return float(value)
 
 
@@ -59,9 +60,9 @@ def _read_ros_yaml(p: Path) -> dict[str, Any]:
         doc = load_yaml_file(p, YamlLimits(max_bytes=1 << 20, max_nodes=10_000, max_depth=16))
     except YamlInputError as exc:
         where = f"line {exc.line}" if exc.line is not None else None
-        raise _err(str(p), where, exc.problem, _A_ROS) from None
+        raise map_error(str(p), where, exc.problem, _A_ROS) from None
     if not isinstance(doc, dict):
-        raise _err(str(p), None, f"top level is a {type(doc).__name__}, not a mapping", _A_ROS)
+        raise map_error(str(p), None, f"top level is a {type(doc).__name__}, not a mapping", _A_ROS)
     return doc
 
 
@@ -80,40 +81,40 @@ def load_ros_map(
     ``p < free_thresh`` free, anything else unknown (scale's in-between values included).
     Raw mode reads v (after negate) as percent occupancy; ``v > 100`` is unknown.
     Unknown cells are walls when ``unknown_is_occupied`` (default), free otherwise. An image
-    of more than ``max_cells`` pixels (default ``loaders.MAX_CELLS``) is refused unread.
+    of more than ``max_cells`` pixels (default ``map_io.MAX_CELLS``) is refused unread.
     """
-    p = _require_file(yaml_path)
+    p = require_file(yaml_path)
     src, doc = str(p), _read_ros_yaml(p)
     image = _ros_key(doc, "image", src)
     if not isinstance(image, str) or not image.strip():
-        raise _err(src, "key 'image'", f"{image!r} is not allowed", "an image file path")
+        raise map_error(src, "key 'image'", f"{image!r} is not allowed", "an image file path")
     res = _ros_number(_ros_key(doc, "resolution", src), src, "resolution", "metres per pixel > 0")
     if res <= 0:
-        raise _err(src, "key 'resolution'", f"{res!r} is not allowed", "metres per pixel > 0")
+        raise map_error(src, "key 'resolution'", f"{res!r} is not allowed", "metres per pixel > 0")
     origin = _ros_key(doc, "origin", src)
     if not isinstance(origin, list) or len(origin) != 3:
-        raise _err(src, "key 'origin'", f"{origin!r} is not allowed", "[x, y, yaw]")
+        raise map_error(src, "key 'origin'", f"{origin!r} is not allowed", "[x, y, yaw]")
     ox, oy, yaw = (_ros_number(v, src, "origin", "[x, y, yaw], three numbers") for v in origin)
     if yaw != 0.0:
         problem = f"yaw {yaw!r} rad is not supported"
-        raise _err(src, "key 'origin'", problem, "yaw 0; rotate the image instead")
+        raise map_error(src, "key 'origin'", problem, "yaw 0; rotate the image instead")
     negate = _ros_key(doc, "negate", src)
     if isinstance(negate, float) or negate not in (0, 1):
-        raise _err(src, "key 'negate'", f"{negate!r} is not allowed", "0 or 1")
-    occ_th = _fraction(_ros_key(doc, "occupied_thresh", src), src, "key 'occupied_thresh'")
-    free_th = _fraction(_ros_key(doc, "free_thresh", src), src, "key 'free_thresh'")
+        raise map_error(src, "key 'negate'", f"{negate!r} is not allowed", "0 or 1")
+    occ_th = fraction(_ros_key(doc, "occupied_thresh", src), src, "key 'occupied_thresh'")
+    free_th = fraction(_ros_key(doc, "free_thresh", src), src, "key 'free_thresh'")
     if free_th > occ_th:
         problem = f"{free_th!r} is above occupied_thresh {occ_th!r}"
-        raise _err(src, "key 'free_thresh'", problem, "free_thresh <= occupied_thresh")
+        raise map_error(src, "key 'free_thresh'", problem, "free_thresh <= occupied_thresh")
     mode = doc.get("mode", "trinary")
     if mode not in ROS_MODES:
-        raise _err(src, "key 'mode'", f"{mode!r} is not allowed", ", ".join(ROS_MODES))
+        raise map_error(src, "key 'mode'", f"{mode!r} is not allowed", ", ".join(ROS_MODES))
 
     image_path = Path(image) if Path(image).is_absolute() else p.parent / image
     if not image_path.is_file():
         problem = f"image file {str(image_path)!r} not found"
-        raise _err(src, "key 'image'", problem, "an existing image, relative to the YAML file")
-    grey = _read_grey(image_path, f"{image_path} (image of {src})", max_cells)
+        raise map_error(src, "key 'image'", problem, "an existing image, relative to the YAML file")
+    grey = read_grey(image_path, f"{image_path} (image of {src})", max_cells)
     if mode == "raw":
         value = 255.0 - grey if negate else grey
         known, p_occ = value <= 100.0, value / 100.0
@@ -121,7 +122,7 @@ def load_ros_map(
         known, p_occ = np.ones(grey.shape, bool), (grey if negate else 255.0 - grey) / 255.0
     occupied, free = known & (p_occ > occ_th), known & (p_occ < free_th)
     walls = ~free if unknown_is_occupied else occupied
-    return _make_grid(walls, res, (ox, oy), src)
+    return make_grid(walls, res, (ox, oy), src)
 
 
 def save_ros_map(grid: OccupancyGrid, yaml_path: str | Path) -> Path:
@@ -136,8 +137,8 @@ def save_ros_map(grid: OccupancyGrid, yaml_path: str | Path) -> Path:
     yp = Path(yaml_path)
     if yp.suffix.lower() not in ROS_EXTENSIONS:
         problem = f"{yp.suffix or '(none)'!r} is not allowed"
-        raise _err(str(yp), "extension", problem, " ".join(ROS_EXTENSIONS))
-    _save_grey(grid, yp.with_suffix(".pgm"), _ROS_FREE_PIXEL, "PPM")
+        raise map_error(str(yp), "extension", problem, " ".join(ROS_EXTENSIONS))
+    save_grey(grid, yp.with_suffix(".pgm"), _ROS_FREE_PIXEL, "PPM")
     doc = {
         "image": yp.with_suffix(".pgm").name,
         "mode": "trinary",

@@ -1,28 +1,34 @@
-"""Our own recordings as SLAM logs: :class:`McapScanLog` reads ``run.mcap`` (``agvsim run``).
+"""Our own recordings as SLAM logs: :class:`McapScanLog` reads ``run.mcap`` (``agvsim run``),
+and :func:`open_scan_log` opens any log the offline SLAM reads, by its file ending.
 
 Each scan of the chosen robot's lidar (``/<robot>/<sensor>``, ``sensor_msgs/LaserScan``)
-becomes a :class:`~agvsim.slam.carmen.ScanRecord`: its header stamp, ranges (``inf`` kept for no
-return), beam angles in the laser frame, ``range_max``, the wheel-odometry pose of the robot at
-the scan's time (``/<robot>/odom``, interpolated between its two neighbours) and the laser's
-mount (``/tf_static``: ``<robot>/base_link`` -> ``<robot>/<sensor>``). By default the first
-robot (scenario order) with a lidar is used.
+becomes an :class:`agvsim.scan.LaserScan` as recorded: its header stamp, ranges (``inf`` kept for
+no return), angles in the laser frame, the laser's mount pose (``/tf_static``:
+``<robot>/base_link`` -> ``<robot>/<sensor>``) and, in ``odom_pose``, the wheel-odometry pose
+of the robot at the scan's time (``/<robot>/odom``, interpolated between its two neighbours).
+By default the first robot (scenario order) with a lidar is used.
 
 Reading goes through :mod:`agvsim.record.mcap_reader` (rosbags); the simulator is never
-imported.
+imported. This module sits in the record layer, above :mod:`agvsim.slam`: the SLAM package
+imports nothing of ``agvsim.record``, so the pose-graph optimiser loads no MCAP reader.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from agvsim.angles import wrap_angle
 from agvsim.record.mcap_reader import Recording, RecordingError
 from agvsim.record.ros2msg import topic_name
-from agvsim.slam.carmen import ScanRecord
+from agvsim.scan import LaserScan
+from agvsim.slam.offline import READERS as SLAM_READERS
+from agvsim.slam.offline import ScanLog, open_log
 
-__all__ = ["McapScanLog", "interpolate_poses"]
+__all__ = ["READERS", "McapScanLog", "interpolate_poses", "open_scan_log"]
 
 
 def interpolate_poses(t_query: np.ndarray, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -35,7 +41,7 @@ def interpolate_poses(t_query: np.ndarray, t: np.ndarray, poses: np.ndarray) -> 
     x = np.interp(t_query, t, poses[:, 0])
     y = np.interp(t_query, t, poses[:, 1])
     a = np.interp(t_query, t, th)
-    a = np.pi - np.mod(np.pi - a, 2 * np.pi)  # wrapped to (-pi, pi]
+    a = wrap_angle(a)
     return np.column_stack([x, y, a])
 
 
@@ -69,25 +75,34 @@ class McapScanLog:
         t_odom, odom, _ = rec.odometry(odom_topic)
         if len(t_odom) == 0:
             raise RecordingError(f"{self.path}: {odom_topic} holds no odometry")
-        self.odom_poses = interpolate_poses(self.scans.t_s, t_odom, odom)
-        mount = rec.static_transforms().get(self.scans.frame_id)
-        self.laser_offset = np.array(mount[1:] if mount is not None else (0.0, 0.0, 0.0))
+        self.odom_poses = interpolate_poses(self.scans.stamp_s, t_odom, odom)
 
     def __len__(self) -> int:
-        return len(self.scans.t_s)
+        return len(self.scans)
 
-    def __iter__(self) -> Iterator[ScanRecord]:
-        s = self.scans
-        angles = s.angles_rad
-        for k in range(len(s.t_s)):
-            ranges = s.ranges[k].copy()
+    def __iter__(self) -> Iterator[LaserScan]:
+        for k in range(len(self.scans)):
+            scan = self.scans.scan(k)
             # -inf (closer than range_min) and 0 (inside a wall) carry no usable distance
-            ranges[~(ranges > 0)] = np.inf
-            yield ScanRecord(
-                float(s.t_s[k]),
-                ranges,
-                angles.copy(),
-                s.range_max_m,
-                self.odom_poses[k].copy(),
-                self.laser_offset.copy(),
-            )
+            scan.ranges[~(scan.ranges > 0)] = np.inf
+            yield replace(scan, odom_pose=self.odom_poses[k].copy())
+
+
+READERS: dict[str, Callable[[Path], ScanLog]] = {
+    **SLAM_READERS,  # CARMEN .clf / .clf.gz
+    ".mcap": McapScanLog,  # agvsim's own recordings (run.mcap)
+}
+
+
+def open_scan_log(path: str | Path, robot: str | None = None, sensor: str | None = None) -> ScanLog:
+    """The reader registered for the file's ending (:data:`READERS`). ``robot`` and ``sensor``
+    pick the scans of a recording of several (agvsim's ``.mcap``); other logs hold one laser."""
+    p = Path(path)
+    if p.name.lower().endswith(".mcap"):
+        return McapScanLog(p, robot, sensor)
+    if robot is not None or sensor is not None:
+        raise ValueError(
+            f"{p}: --robot and --sensor pick the scans of an agvsim recording (.mcap); "
+            "this log holds one laser"
+        )
+    return open_log(p, READERS)
