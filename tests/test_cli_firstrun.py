@@ -38,8 +38,11 @@ def test_run_of_a_missing_file_says_so_first(tmp_path):
 def test_models_prints_parameters_as_people_write_them():
     res = CliRunner().invoke(app, ["models"])
     assert res.exit_code == 0
-    assert "max_steer_rad=1.5708" in res.output
+    assert "max_steer_rad = 1.5708" in res.output
     assert "1.5707963267948966" not in res.output
+    # every parameter with what it allows, from the one declaration on the model's dataclass
+    assert "max_steer_rad = 0.610865  (a positive number below pi/2 rad (90 deg))" in res.output
+    assert "steering_geometry = ackermann  (ackermann | parallel)" in res.output
 
 
 @pytest.mark.slow  # writes videos (ffmpeg)

@@ -607,18 +607,28 @@ def statechart(
 
 @app.command()
 def models() -> None:
-    """List the kinematic models and their parameters."""
-    from dataclasses import MISSING, fields
+    """List the kinematic models and their parameters (default, allowed values, meaning)."""
+    from dataclasses import fields
 
     from agvsim.kinematics import MODELS
+    from agvsim.kinematics.params import bounds_of, choices_of
 
     for name, cls in MODELS.items():
-        params = ", ".join(
-            f"{f.name}={f.default:.6g}" if isinstance(f.default, float) else f"{f.name}={f.default}"
-            for f in fields(cls)
-            if f.default is not MISSING
-        )
-        out.print(f"[bold]{name}[/bold]: wheels {list(cls.wheel_names)}; {params}")
+        wheels: tuple[str, ...] = getattr(cls, "wheel_names", ())
+        out.print(f"[bold]{name}[/bold] ({cls.__name__}): wheels {', '.join(wheels)}")
+        choices = choices_of(cls)
+        for f in fields(cls):
+            default = f"{f.default:.6g}" if isinstance(f.default, float) else f"{f.default}"
+            bounds = bounds_of(f)
+            allowed = (
+                " | ".join(choices[f.name])
+                if f.name in choices
+                else bounds.describe()
+                if bounds is not None
+                else ""
+            )
+            doc = f.metadata.get("doc", "")
+            out.print(f"  {f.name} = {default}  ({allowed}){'  ' + doc if doc else ''}")
 
 
 if __name__ == "__main__":  # pragma: no cover
