@@ -28,6 +28,7 @@ from typing import Any
 from agvsim.app.session import DEFAULT_OUT, EditError, Session
 from agvsim.fleet.broker import EmbeddedBroker
 from agvsim.fleet.build import Fleet, build_fleet, load_layout
+from agvsim.fleet.run import TransportLink
 from agvsim.fleet.transport import BrokerAddress, MqttTransport
 from agvsim.fleet.viz import draw_layout
 from agvsim.scenario import Scenario, ScenarioError
@@ -88,8 +89,9 @@ class FleetSession(Session):
         self.transport: MqttTransport | None = None
         self.link: Any = None  # the built-in master's MQTT side (agvsim.master.mqtt.MqttMaster)
         self.with_master, self.master_period_s = with_master, master_period_s
-        self._breakdowns: list[tuple[float, str]] = []
-        self._next_master_s = 0.0
+        # after each step, in order (agvsim.run_loop's observer protocol): the VDA 5050
+        # bridge, then (with the built-in master) breakdowns and the master's decisions
+        self.fleet_observers: list[Any] = []
         self.connect_timeout_s = connect_timeout_s
         self.address = BrokerAddress.parse(broker_url) if broker_url else None
         try:
@@ -130,6 +132,7 @@ class FleetSession(Session):
             transport.close()
             raise BrokerError(f"no vehicle could connect to {self.broker_url}")
         self.transport = transport
+        self.fleet_observers = [TransportLink(transport)]
         self._start_master(fleet, sc)
         return fleet.sim
 
@@ -142,9 +145,8 @@ class FleetSession(Session):
             return
         from datetime import UTC, datetime
 
-        from agvsim.master.config import MasterConfig
-        from agvsim.master.mqtt import MqttMaster
-        from agvsim.master.run import build_master
+        from agvsim.master.mqtt import MqttMaster, MqttMasterTick
+        from agvsim.master.run import Breakdowns, build_master
 
         master = build_master(sc, fleet, sc.seed, sc.duration_s, datetime.now(UTC))
         assert self.address is not None
@@ -153,23 +155,12 @@ class FleetSession(Session):
             link.close()
             raise BrokerError(f"the master could not connect to {self.broker_url}")
         self.link = link
-        cfg = sc.master or MasterConfig()
-        self._breakdowns = sorted((b.at_s, b.vehicle) for b in cfg.breakdowns)
-        self._next_master_s = 0.0
-
-    def _tick_master(self) -> None:
-        """Scheduled breakdowns hit the simulated vehicles; the master decides every
-        ``master_period_s`` of simulated time, as in ``agvsim fleet``."""
-        if self.link is None or self.fleet is None:
-            return
-        t = float(self.sim.state.t_s)
-        while self._breakdowns and self._breakdowns[0][0] <= t + 1e-9:
-            _, serial = self._breakdowns.pop(0)
-            self.fleet.vehicle(serial).break_down(f"scheduled breakdown at t={t:.2f} s")
-        if t + 1e-9 >= self._next_master_s:
-            self._next_master_s += self.master_period_s
-            self.link.tick(t)
-            self.link.master.metrics.collisions = int(self.sim.state.robot_collisions.sum())
+        # as in agvsim fleet: scheduled breakdowns hit the simulated vehicles, the master
+        # decides every master_period_s of simulated time
+        self.fleet_observers += [
+            Breakdowns(sc, fleet),
+            MqttMasterTick(link, master, self.master_period_s),
+        ]
 
     def _replace(self, cfg: dict[str, Any], fresh: set[str] = frozenset()) -> list[str]:  # type: ignore[assignment]
         """A rebuilt fleet's vehicles start at their start nodes, with no order: every robot
@@ -178,10 +169,8 @@ class FleetSession(Session):
 
     def _step_once(self) -> bool:
         ok = super()._step_once()
-        if self.transport is not None:
-            self.transport.flush()
-            self.transport.poll(0.0)
-        self._tick_master()
+        for o in self.fleet_observers:
+            o.on_step(self.sim)
         return ok
 
     def advance(self, wall_dt_s: float, max_work_s: float = 0.03) -> int:
@@ -200,6 +189,7 @@ class FleetSession(Session):
     def close(self) -> None:
         """Every vehicle publishes OFFLINE and disconnects; the embedded broker stops."""
         with self.lock:
+            self.fleet_observers = []
             link, self.link = self.link, None
             if link is not None:
                 link.close()

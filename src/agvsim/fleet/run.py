@@ -10,11 +10,28 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from datetime import datetime
+from typing import Any
 
 from agvsim.fleet.broker import EmbeddedBroker
 from agvsim.fleet.build import Fleet, build_fleet
 from agvsim.fleet.transport import BrokerAddress, MqttTransport
 from agvsim.scenario import Scenario
+from agvsim.sim.engine import Simulation
+
+
+class TransportLink:
+    """The VDA 5050 bridge as a run observer (agvsim.run_loop's protocol): after each step it
+    publishes what the vehicles queued and serves the sockets once."""
+
+    def __init__(self, transport: MqttTransport):
+        self.transport = transport
+
+    def on_step(self, sim: Simulation) -> None:
+        self.transport.flush()
+        self.transport.poll(0.0)
+
+    def close(self) -> None:
+        pass  # the run closes the transport (every vehicle OFFLINE first)
 
 
 class FleetRun:
@@ -32,14 +49,17 @@ class FleetRun:
         url = broker_url or self.broker.url  # type: ignore[union-attr]
         self.address = BrokerAddress.parse(url)
         self.transport = MqttTransport(self.address, self.fleet.vehicles, self.fleet.interface_name)
+        # what runs after each step, in order (agvsim.run_loop's observer protocol)
+        self.observers: list[Any] = [TransportLink(self.transport)]
 
     def connect(self, timeout_s: float = 10.0) -> int:
         return self.transport.connect(timeout_s)
 
     def step(self) -> None:
-        self.fleet.sim.step()
-        self.transport.flush()
-        self.transport.poll(0.0)
+        sim = self.fleet.sim
+        sim.step()
+        for o in self.observers:
+            o.on_step(sim)
 
     def run(
         self,

@@ -21,10 +21,10 @@ import paho.mqtt.client as mqtt
 
 from agvsim.fleet.run import FleetRun
 from agvsim.fleet.transport import BrokerAddress
-from agvsim.master.config import MasterConfig
 from agvsim.master.master import Master
-from agvsim.master.run import build_master, with_fleet_size
+from agvsim.master.run import Breakdowns, build_master, with_fleet_size
 from agvsim.scenario import Scenario
+from agvsim.sim.engine import Simulation
 
 LISTEN = ("state", "factsheet")
 
@@ -84,6 +84,24 @@ class MqttMaster:
         self.client.loop_stop()
 
 
+class MqttMasterTick:
+    """Run observer: the master decides every ``period_s`` (its messages go out on MQTT)."""
+
+    def __init__(self, link: MqttMaster, master: Master, period_s: float):
+        self.link, self.master, self.period_s = link, master, period_s
+        self._next_tick_s = 0.0
+
+    def on_step(self, sim: Simulation) -> None:
+        t = float(sim.state.t_s)
+        if t + 1e-9 >= self._next_tick_s:
+            self._next_tick_s += self.period_s
+            self.link.tick(t)
+        self.master.metrics.collisions = int(sim.state.robot_collisions.sum())
+
+    def close(self) -> None:
+        pass
+
+
 class MasteredFleetRun(FleetRun):
     """``agvsim fleet``'s run with the master beside the vehicles, both on the broker only
     (scheduled breakdowns are applied to the simulated vehicles, as in-process)."""
@@ -103,29 +121,18 @@ class MasteredFleetRun(FleetRun):
         super().__init__(sc, broker_url, epoch, seed)
         s = sc.seed if seed is None else seed
         self.master = build_master(sc, self.fleet, s, horizon_s or sc.duration_s, epoch)
-        cfg = sc.master or MasterConfig()
-        self.breakdowns = sorted((b.at_s, b.vehicle) for b in cfg.breakdowns)
         self.link = MqttMaster(self.master, self.address, self.fleet.interface_name)
         self.period_s = master_period_s
-        self._next_tick_s = 0.0
+        self.observers += [
+            Breakdowns(sc, self.fleet),
+            MqttMasterTick(self.link, self.master, master_period_s),
+        ]
 
     def connect(self, timeout_s: float = 10.0) -> int:
         online = super().connect(timeout_s)
         if not self.link.connect(timeout_s):
             raise OSError(f"the master could not connect to {self.address.host}")
         return online
-
-    def step(self) -> None:
-        super().step()
-        sim = self.fleet.sim
-        t = float(sim.state.t_s)
-        while self.breakdowns and self.breakdowns[0][0] <= t + 1e-9:
-            _, serial = self.breakdowns.pop(0)
-            self.fleet.vehicle(serial).break_down(f"scheduled breakdown at t={t:.2f} s")
-        if t + 1e-9 >= self._next_tick_s:
-            self._next_tick_s += self.period_s
-            self.link.tick(t)
-        self.master.metrics.collisions = int(sim.state.robot_collisions.sum())
 
     def wait_settled(self, timeout_s: float = 2.0) -> None:
         """Serve the sockets until the vehicles' last messages reached the master."""

@@ -18,6 +18,7 @@ from agvsim.master.config import MasterConfig
 from agvsim.master.master import Master
 from agvsim.master.orders import scheduled_transports
 from agvsim.scenario import Scenario, ScenarioError
+from agvsim.sim.engine import Simulation
 
 EPOCH = datetime(2026, 1, 1, tzinfo=UTC)
 
@@ -67,6 +68,50 @@ def build_master(
     return Master(fleet.layout, cfg, transports, epoch)
 
 
+class Breakdowns:
+    """Run observer: fails each vehicle at its scheduled time (``master.breakdowns``)."""
+
+    def __init__(self, sc: Scenario, fleet: Fleet):
+        cfg = sc.master or MasterConfig()
+        self.due = sorted((b.at_s, b.vehicle) for b in cfg.breakdowns)
+        self.fleet = fleet
+
+    def on_step(self, sim: Simulation) -> None:
+        t = float(sim.state.t_s)
+        while self.due and self.due[0][0] <= t + 1e-9:
+            _, serial = self.due.pop(0)
+            self.fleet.vehicle(serial).break_down(f"scheduled breakdown at t={t:.2f} s")
+
+    def close(self) -> None:
+        pass
+
+
+class MasterLink:
+    """Run observer, the in-process bridge: hands what the vehicles published to the master,
+    lets the master decide every ``period_s`` and hands its messages to the vehicles."""
+
+    def __init__(self, master: Master, fleet: Fleet, period_s: float):
+        self.master, self.fleet, self.period_s = master, fleet, period_s
+        self.by_serial = {v.cfg.serial: v for v in fleet.vehicles}
+        self._next_tick_s = 0.0
+
+    def on_step(self, sim: Simulation) -> None:
+        t = float(sim.state.t_s)
+        m = self.master
+        for v in self.fleet.vehicles:
+            for topic, msg, _retained in v.drain():
+                if topic in ("state", "factsheet"):
+                    m.receive(v.cfg.serial, topic, msg)
+        if t + 1e-9 >= self._next_tick_s:
+            self._next_tick_s += self.period_s
+            for serial, topic, msg in m.tick(t):
+                self.by_serial[serial].receive(topic, msg)
+        m.metrics.collisions = int(sim.state.robot_collisions.sum())
+
+    def close(self) -> None:
+        pass
+
+
 class InProcessRun:
     """The scenario's fleet driven by the master, no broker. ``master_period_s``: how often
     the master decides (default: every simulation step)."""
@@ -84,11 +129,12 @@ class InProcessRun:
         self.duration_s = sc.duration_s if duration_s is None else duration_s
         self.fleet = build_fleet(sc, epoch=EPOCH, seed=self.seed)
         self.master = build_master(sc, self.fleet, self.seed, self.duration_s)
-        cfg = sc.master or MasterConfig()
-        self.breakdowns = sorted((b.at_s, b.vehicle) for b in cfg.breakdowns)
-        self.by_serial = {v.cfg.serial: v for v in self.fleet.vehicles}
         self.period_s = master_period_s or self.fleet.sim.dt_s
-        self._next_tick_s = 0.0
+        # after each step, in order (agvsim.run_loop's observer protocol)
+        self.observers: list[Any] = [
+            Breakdowns(sc, self.fleet),
+            MasterLink(self.master, self.fleet, self.period_s),
+        ]
 
     @property
     def t_s(self) -> float:
@@ -97,20 +143,8 @@ class InProcessRun:
     def step(self) -> None:
         sim = self.fleet.sim
         sim.step()
-        t = self.t_s
-        while self.breakdowns and self.breakdowns[0][0] <= t + 1e-9:
-            _, serial = self.breakdowns.pop(0)
-            self.by_serial[serial].break_down(f"scheduled breakdown at t={t:.2f} s")
-        m = self.master
-        for v in self.fleet.vehicles:
-            for topic, msg, _retained in v.drain():
-                if topic in ("state", "factsheet"):
-                    m.receive(v.cfg.serial, topic, msg)
-        if t + 1e-9 >= self._next_tick_s:
-            self._next_tick_s += self.period_s
-            for serial, topic, msg in m.tick(t):
-                self.by_serial[serial].receive(topic, msg)
-        m.metrics.collisions = int(sim.state.robot_collisions.sum())
+        for o in self.observers:
+            o.on_step(sim)
 
     def run(
         self,
