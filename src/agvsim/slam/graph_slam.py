@@ -11,8 +11,12 @@ Per scan (:meth:`GraphSlam.update`), in the order of the paper (Hess et al. 2016
    relative pose, and odometry's with its learnt noise);
 3. look for loop closures: finished submaps within the search radius, branch-and-bound matching,
    verification (:mod:`.loop_closure`);
-4. when a loop closed, optimise the sparse pose graph (Levenberg-Marquardt with a Huber kernel,
-   :mod:`.posegraph`).
+4. when a loop closed, optimise the sparse pose graph (Levenberg-Marquardt, :mod:`.posegraph`):
+   a Huber kernel on local-SLAM and odometry edges, switchable constraints on loop closures
+   (dynamic covariance scaling, :class:`~.robust.RobustKernel`), so a false closure that got
+   through verification is switched off instead of bending the map. The switches' prior is
+   relaxed first and tightened in stages (graduated non-convexity): a right closure after a
+   long loop starts far from the drifted graph and would be switched off at once otherwise.
 
 The graph's variables are the global poses of keyframes and of submap origins. Every scan keeps
 its local pose and its keyframe, so its global pose after optimisation is
@@ -33,7 +37,7 @@ from agvsim.slam.frontend import MotionFilter, Submap, Tracker, TrackingConfig
 from agvsim.slam.loop_closure import LoopClosure, LoopConfig, LoopDetector
 from agvsim.slam.mapping import OccupancyMap, render_occupancy
 from agvsim.slam.memory import release_free_heap
-from agvsim.slam.posegraph import PoseGraph, optimize
+from agvsim.slam.posegraph import PoseGraph, edge_chi2, optimize
 from agvsim.slam.se2 import between, compose, inverse
 
 __all__ = ["GraphSlam", "SlamConfig"]
@@ -67,6 +71,9 @@ class SlamConfig:
     sigma_local_m: float = 0.02  # std of a local-SLAM relative pose (keyframe chain, submaps)
     sigma_local_rad: float = math.radians(0.5)
     huber_scale: float = 3.0  # in standard deviations
+    switchable_loops: bool = True  # loop closures as switchable constraints (else Huber)
+    switch_scale: float = 3.0  # closures within this many std keep their full weight
+    switch_stage_factor: float = 10.0  # graduated prior: chi2 bound divided by this per stage
     odometry_edges: bool = True  # keyframe-to-keyframe odometry edges, weighted by the noise
     odometry_floor_m: float = 0.002  # that tracking estimated (floors of their std per scan)
     odometry_floor_rad: float = math.radians(0.02)
@@ -148,6 +155,8 @@ class GraphSlam:
         self.n_optimisations = 0
         self._global_from_local = np.zeros(3)
         self._unoptimised: list[LoopClosure] = []
+        self._loop_edge_ids: list[int] = []  # graph edge index of every loop closure
+        self.switches = np.zeros(0)  # switch of every loop closure at the last optimisation
         self._last_optimised_node = 0
         self._info_local = _information(cfg.sigma_local_m, cfg.sigma_local_rad)
         self._scan_at_keyframe = 0
@@ -318,7 +327,8 @@ class GraphSlam:
         return out
 
     def add_loop_closure(self, c: LoopClosure) -> None:
-        """Submap -> node edge with the match as measurement (Huber-robust in optimisation)."""
+        """Submap -> node edge with the match as measurement (switchable in optimisation)."""
+        self._loop_edge_ids.append(self.graph.n_edges)
         self.graph.add_edge(
             self.submap_var[c.submap], self.node_var[c.node], c.measurement, c.information
         )
@@ -334,16 +344,43 @@ class GraphSlam:
         big = any(not self.loops.agrees(between(c.estimate, c.matched)) for c in self._unoptimised)
         return big or len(self.keyframes) - self._last_optimised_node >= self.cfg.optimize_every
 
+    def switchable_edges(self) -> NDArray[np.bool_]:
+        """(E,) True for the graph's loop-closure edges (all False if they are not switchable)."""
+        mask = np.zeros(self.graph.n_edges, dtype=bool)
+        if self.cfg.switchable_loops:
+            mask[np.asarray(self._loop_edge_ids, dtype=np.int64)] = True
+        return mask
+
+    def switch_stages(self, mask: NDArray[np.bool_]) -> list[float]:
+        """Switch scales (std) to optimise with in turn: from one that keeps every closure
+        whole at the current poses down to ``switch_scale``, divided by
+        ``switch_stage_factor`` in chi2 per stage (graduated non-convexity)."""
+        final = self.cfg.switch_scale**2
+        worst = float(edge_chi2(self.graph)[mask].max()) if mask.any() else 0.0
+        stages = []
+        while worst > final:
+            stages.append(math.sqrt(worst))
+            worst /= self.cfg.switch_stage_factor
+        return [*stages, math.sqrt(final)]
+
     def optimise(self, max_iterations: int = 20) -> None:
-        """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed)."""
-        result = optimize(
-            self.graph,
-            robust="huber",
-            robust_scale=self.cfg.huber_scale,
-            max_iterations=max_iterations,
-            tolerance=1e-6,
-        )
-        self.graph.poses = result.poses
+        """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed),
+        loop closures switchable (:meth:`switch_stages`)."""
+        mask = self.switchable_edges()
+        stages = self.switch_stages(mask)
+        for k, scale in enumerate(stages):
+            final = k == len(stages) - 1
+            result = optimize(
+                self.graph,
+                robust="huber",
+                robust_scale=self.cfg.huber_scale,
+                max_iterations=max_iterations if final else min(max_iterations, 10),
+                tolerance=1e-6 if final else 1e-4,
+                switchable=mask,
+                switch_scale=scale,
+            )
+            self.graph.poses = result.poses
+        self.switches = result.switches[mask]
         last = len(self.keyframes) - 1
         g_last = self.graph.poses[self.node_var[last]]
         self._global_from_local = compose(g_last, inverse(self.keyframes[last].local))
