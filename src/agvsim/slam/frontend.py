@@ -69,6 +69,8 @@ class TrackingConfig:
     lost_score: float = 0.35  # below it after the wide search for lost_scans scans: relocalise
     lost_scans: int = 3
     relocalise_window_m: float = 2.0  # relocalisation search: +- this, all headings
+    global_min_score: float = 0.7  # global relocalisation (all submaps) accepted from this score
+    global_points: int = 96  # scan points the global search places (then all are refined)
 
 
 @njit(cache=True)
@@ -231,6 +233,8 @@ class Tracker:
         self.doubted = False  # the last scan's match refuted odometry
         self.odom_suspect = False  # ... or its scan-to-scan odometry increment was wrong
         self.n_relocalised = 0
+        self.lost = False  # tracking lost and not found again near the prediction
+        self.poor = 0  # scans in a row that fit under retry_score
         self._lost = 0
 
     def predict(self, odom_pose: F64) -> list[F64]:
@@ -306,6 +310,9 @@ class Tracker:
         self._lost = self._lost + 1 if score < cfg.lost_score else 0
         if self._lost >= cfg.lost_scans:
             pose, score = self._relocalise(s, points, guess, ang_step, pose, score)
+        # a poor fit even after the wide search: kidnapped, or entering unmapped space
+        self.poor = self.poor + 1 if score < cfg.retry_score else 0
+        self.lost = self._lost >= cfg.lost_scans or self.poor >= cfg.lost_scans
         refined, score2, _ = sm.gauss_newton(
             s.likelihood, s.ox, s.oy, res, points, pose, cfg.gn_iterations, cfg.gn_prior_weight
         )
@@ -347,6 +354,18 @@ class Tracker:
             self._lost = 0
             return found, found_score
         return pose, score
+
+    def restart(self, pose: F64) -> list[Submap]:
+        """Resume tracking at ``pose`` (local frame) after a global relocalisation: the active
+        submaps are finished (the next keyframe starts a new one there), the odometry check
+        forgets its reference (odometry did not see the robot carried off). Returns the
+        submaps finished."""
+        done = self.finish_all()
+        self.pose = np.asarray(pose, np.float64).copy()
+        self.check = OdometryCheck(self.cfg.doubt)
+        self.lost, self._lost, self.poor = False, 0, 0
+        self.n_relocalised += 1
+        return done
 
     def odometry_variance(self) -> tuple[float, float] | None:
         """Odometry's estimated variance per scan (translation per axis m^2, heading rad^2),
