@@ -27,7 +27,7 @@ from agvsim.slam import scan_matching as sm
 from agvsim.slam.fusion import OdometryFusion
 from agvsim.slam.mapping import gaussian_kernel, likelihood_field, stamp_points, update_log_odds
 from agvsim.slam.odometry_check import DoubtConfig, OdometryCheck
-from agvsim.slam.se2 import between
+from agvsim.slam.se2 import between, compose
 
 __all__ = ["MotionFilter", "OdometryFusion", "Submap", "Tracker", "TrackingConfig"]
 
@@ -222,7 +222,9 @@ class Tracker:
         self.cfg = cfg
         self.kernel = gaussian_kernel(cfg.sigma_m, cfg.resolution_m)
         self.pose: F64 | None = None  # local pose of the last scan
-        self.odom: F64 | None = None
+        self.odom: F64 | None = None  # last scan's pose on scale-corrected odometry
+        self.odom_raw: F64 | None = None  # ... on odometry as given
+        self.odom_now = np.zeros(3)  # the scan being processed, corrected (predict)
         self.active: list[Submap] = []
         self.submaps: list[Submap] = []
         floors = (cfg.odom_floor_m_per_m, cfg.odom_floor_rad_per_rad, cfg.odom_floor_rad_per_m)
@@ -240,10 +242,17 @@ class Tracker:
     def predict(self, odom_pose: F64) -> list[F64]:
         """Predictions of the scan's pose, scan to scan ``x_prev * (o_prev^-1 * o_now)`` first,
         then from the last scan odometry agreed with (:class:`~.odometry_check.OdometryCheck`);
-        the first scan starts at its odometry."""
-        if self.pose is None or self.odom is None:
-            return [np.asarray(odom_pose, np.float64).copy()]
-        return self.check.candidates(self.pose, self.odom, odom_pose)
+        the first scan starts at its odometry. Odometry's increments are scaled by the
+        fusion's estimate of its scale (:meth:`~.fusion.OdometryFusion.scale`): ``odom_now``
+        is the scan's pose on that corrected odometry."""
+        raw = np.asarray(odom_pose, np.float64)
+        if self.pose is None or self.odom is None or self.odom_raw is None:
+            self.odom_now = raw.copy()
+            return [raw.copy()]
+        u = between(self.odom_raw, raw)
+        u[:2] *= 1.0 if self.fusion is None else self.fusion.scale()
+        self.odom_now = compose(self.odom, u)
+        return self.check.candidates(self.pose, self.odom, self.odom_now)
 
     def match(self, points: F64, guesses: list[F64], ang_step: float) -> tuple[F64, float]:
         """Correlative search then Gauss-Newton against the older active submap, around the
@@ -375,10 +384,11 @@ class Tracker:
         return self.fusion.odometry_variance()
 
     def accept(self, pose: F64, odom_pose: F64) -> None:
-        self.pose, self.odom = pose, np.asarray(odom_pose, np.float64).copy()
+        self.pose, self.odom = pose, self.odom_now.copy()
+        self.odom_raw = np.asarray(odom_pose, np.float64).copy()
         self.check.accept(pose, self.odom, self.doubted)
         if self.fusion is not None:
-            self.fusion.add(self.odom)
+            self.fusion.add(self.odom_raw)  # raw: the fusion estimates the scale from it
 
     def insert(
         self, node: int, pose: F64, sensor_xy: F64, ends: F64, hits: NDArray[np.bool_]

@@ -204,9 +204,9 @@ class GraphSlam:
         return self._step(timestamp, ranges, angles, odom_pose)
 
     def _step(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
-        self._odom = np.asarray(odom_pose, np.float64)
         points, ends, hits = self.scan_points(ranges, angles)
         guesses = self.tracker.predict(odom_pose)
+        self._odom = self.tracker.odom_now.copy()  # scale-corrected (odometry edges)
         pose, score = self.tracker.match(points, guesses, self.angular_step(points))
         # a scan that fits poorly is not mapped until it is clear whether the robot entered
         # unmapped space (it goes on) or was carried off (found again in an old submap)
