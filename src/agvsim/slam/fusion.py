@@ -16,6 +16,7 @@ F64 = NDArray[np.float64]
 
 _MIN_SCALE_PATH_M = 5.0  # path in the window (m) before odometry's scale is estimated
 _SCALE_RANGE = (0.8, 1.25)  # a scale estimate outside is clamped (a wrong wheel radius)
+_SCALE_MEMORY = 1.0 - 1.0 / 3000.0  # weight of a scan's increment per scan since
 
 
 class OdometryFusion:
@@ -39,10 +40,11 @@ class OdometryFusion:
 
     Odometry's translation can be off by a constant factor (worn or mis-measured wheels, a
     tyre pressure): a bias, not noise, which the gain would let through since odometry looks
-    precise from scan to scan. :meth:`scale` estimates that factor from the same window, the
-    least-squares ``k`` of ``m ~ k o`` over the lag-``lag`` translation increments of the raw
-    matches ``m`` and of odometry ``o`` (robot frame; zero-mean match noise leaves it
-    unbiased), and :class:`~.frontend.Tracker` drives with odometry's increments scaled by it;
+    precise from scan to scan. :meth:`scale` estimates that factor, the least-squares ``k``
+    of ``m ~ k o`` over the lag-``lag`` translation increments of the raw matches ``m`` and
+    of odometry ``o`` (robot frame; zero-mean match noise leaves it unbiased; a memory of
+    a few thousand scans, longer than the noises' window), and :class:`~.frontend.Tracker`
+    drives with odometry's increments scaled by it;
     the noises are learnt from the scaled increments.
 
     Until it is :meth:`ready`, the pose is odometry's alone (and :class:`~.graph_slam.GraphSlam`
@@ -59,6 +61,7 @@ class OdometryFusion:
         self.sharp: list[float] = []
         self._k = (1.0, 1.0, 1.0, 1.0)  # see estimate()
         self._scale = 1.0  # see scale()
+        self._scale_sums = (0.0, 0.0, 0.0)  # sum m.o, sum o.o, path (m), with forgetting
         self._count = 0
         self._raw: F64 | None = None
         self._last_odom: F64 | None = None
@@ -114,27 +117,35 @@ class OdometryFusion:
         return self._scale
 
     def estimate_scale(self) -> float:
-        """``sum(m . o) / sum(o . o)`` over the window's lag increments (class docstring);
-        1 while the window holds under ``_MIN_SCALE_PATH_M`` of path or ``k`` is within 3
-        standard errors of 1 (odometry's noise, not a bias), clamped to ``_SCALE_RANGE``."""
-        n = min(len(self.matches), len(self.odoms))
-        lag = self.lag
-        if n <= 3 * lag:
-            return 1.0
-        m = np.asarray(self.matches[-n:])
-        o = np.asarray(self.odoms[-n:])
-        dm = between(m[:-lag], m[lag:])[:, :2]
-        do = between(o[:-lag], o[lag:])[:, :2]
-        s_oo = float(np.sum(do * do))
-        path = float(np.sum(np.hypot(do[:, 0], do[:, 1]))) / lag
+        """``sum(m . o) / sum(o . o)`` over lag increments (class docstring), each weighed
+        by ``_SCALE_MEMORY`` per scan since (a wheel's scale changes slowly: a memory longer
+        than the noises' window averages out the matches' noise and the places where they
+        are weak); 1 while the sums hold under ``_MIN_SCALE_PATH_M`` of path or ``k`` is
+        within 3 standard errors of 1 (odometry's noise, not a bias), clamped to
+        ``_SCALE_RANGE``."""
+        s_mo, s_oo, path = self._scale_sums
         if path < _MIN_SCALE_PATH_M or s_oo <= 0.0:
             return 1.0
-        k = float(np.sum(dm * do)) / s_oo
+        k = s_mo / s_oo
         # standard error of k: two matches' noise per increment, increments overlapping lag
         # times (the match variance as last learnt)
-        if abs(k - 1.0) <= 3.0 * math.sqrt(2.0 * self._k[1] * lag / s_oo):
+        if abs(k - 1.0) <= 3.0 * math.sqrt(2.0 * self._k[1] * self.lag / s_oo):
             return 1.0
         return min(max(k, _SCALE_RANGE[0]), _SCALE_RANGE[1])
+
+    def _update_scale_sums(self) -> None:
+        lag = self.lag
+        if len(self.matches) <= lag:
+            return
+        dm = between(self.matches[-1 - lag], self.matches[-1])[:2]
+        do = between(self.odoms[-1 - lag], self.odoms[-1])[:2]
+        s_mo, s_oo, path = self._scale_sums
+        f = _SCALE_MEMORY
+        self._scale_sums = (
+            f * s_mo + float(dm @ do),
+            f * s_oo + float(do @ do),
+            f * path + math.hypot(do[0], do[1]) / lag,
+        )
 
     def ready(self) -> bool:
         """Enough scans taken on the move to estimate the noises."""
@@ -164,6 +175,7 @@ class OdometryFusion:
         self.odoms.append(odom.copy())
         self._raw = None
         self._count += 1
+        self._update_scale_sums()
         keep = self.window + self.lag + 1
         if len(self.odoms) > keep:
             del self.odoms[0]
