@@ -44,9 +44,9 @@ HALL = np.array(
 )
 
 
-def cast(pose: np.ndarray, walls: np.ndarray = HALL) -> np.ndarray:
+def cast(pose: np.ndarray, walls: np.ndarray = HALL, angles: np.ndarray = ANGLES) -> np.ndarray:
     """Ranges of the beams from ``pose`` to the nearest wall segment (inf: no hit)."""
-    th = pose[2] + ANGLES
+    th = pose[2] + angles
     d = np.stack([np.cos(th), np.sin(th)], axis=1)[:, None, :]
     p, e = walls[None, :, :2], walls[None, :, 2:] - walls[None, :, :2]
     w = p - pose[:2]
@@ -290,16 +290,16 @@ def test_finished_submap_keeps_only_its_occupied_cells() -> None:
 
 def test_pyramid_cache_stays_within_its_budget() -> None:
     sub, _ = finished_submap(np.array([[1.5 + 0.2 * k, 1.5, 0.0] for k in range(20)]))
-    one = LoopDetector(LoopConfig(), 0.05)._pyramid(sub).nbytes
+    one = LoopDetector(LoopConfig(), 0.05).pyramid(sub).nbytes
     budget_mib = 2.5 * one / 2**20  # room for two pyramids of this size
     det = LoopDetector(LoopConfig(pyramid_cache_mib=budget_mib), 0.05)
     for index in range(6):
         sub.index = index  # six submaps of the same size
-        det._pyramid(sub)
+        det.pyramid(sub)
         assert det._cached_bytes <= budget_mib * 2**20
     assert list(det._pyramids) == [4, 5]  # the least recently used went first
     assert det._releaser.releases > 0  # the freed heap was handed back as it went
-    np.testing.assert_array_equal(det._pyramid(sub)[0], sub.field())  # level 0 is the field
+    np.testing.assert_array_equal(det.pyramid(sub)[0], sub.field())  # level 0 is the field
 
 
 def test_keyframes_are_stored_compactly() -> None:

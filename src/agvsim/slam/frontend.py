@@ -27,7 +27,7 @@ from agvsim.slam import scan_matching as sm
 from agvsim.slam.fusion import OdometryFusion
 from agvsim.slam.mapping import gaussian_kernel, likelihood_field, stamp_points, update_log_odds
 from agvsim.slam.odometry_check import DoubtConfig, OdometryCheck
-from agvsim.slam.se2 import between
+from agvsim.slam.se2 import between, compose
 
 __all__ = ["MotionFilter", "OdometryFusion", "Submap", "Tracker", "TrackingConfig"]
 
@@ -69,6 +69,8 @@ class TrackingConfig:
     lost_score: float = 0.35  # below it after the wide search for lost_scans scans: relocalise
     lost_scans: int = 3
     relocalise_window_m: float = 2.0  # relocalisation search: +- this, all headings
+    global_min_score: float = 0.7  # global relocalisation (all submaps) accepted from this score
+    global_points: int = 96  # scan points the global search places (then all are refined)
 
 
 @njit(cache=True)
@@ -220,7 +222,9 @@ class Tracker:
         self.cfg = cfg
         self.kernel = gaussian_kernel(cfg.sigma_m, cfg.resolution_m)
         self.pose: F64 | None = None  # local pose of the last scan
-        self.odom: F64 | None = None
+        self.odom: F64 | None = None  # last scan's pose on scale-corrected odometry
+        self.odom_raw: F64 | None = None  # ... on odometry as given
+        self.odom_now = np.zeros(3)  # the scan being processed, corrected (predict)
         self.active: list[Submap] = []
         self.submaps: list[Submap] = []
         floors = (cfg.odom_floor_m_per_m, cfg.odom_floor_rad_per_rad, cfg.odom_floor_rad_per_m)
@@ -231,15 +235,24 @@ class Tracker:
         self.doubted = False  # the last scan's match refuted odometry
         self.odom_suspect = False  # ... or its scan-to-scan odometry increment was wrong
         self.n_relocalised = 0
+        self.lost = False  # tracking lost and not found again near the prediction
+        self.poor = 0  # scans in a row that fit under retry_score
         self._lost = 0
 
     def predict(self, odom_pose: F64) -> list[F64]:
         """Predictions of the scan's pose, scan to scan ``x_prev * (o_prev^-1 * o_now)`` first,
         then from the last scan odometry agreed with (:class:`~.odometry_check.OdometryCheck`);
-        the first scan starts at its odometry."""
-        if self.pose is None or self.odom is None:
-            return [np.asarray(odom_pose, np.float64).copy()]
-        return self.check.candidates(self.pose, self.odom, odom_pose)
+        the first scan starts at its odometry. Odometry's increments are scaled by the
+        fusion's estimate of its scale (:meth:`~.fusion.OdometryFusion.scale`): ``odom_now``
+        is the scan's pose on that corrected odometry."""
+        raw = np.asarray(odom_pose, np.float64)
+        if self.pose is None or self.odom is None or self.odom_raw is None:
+            self.odom_now = raw.copy()
+            return [raw.copy()]
+        u = between(self.odom_raw, raw)
+        u[:2] *= 1.0 if self.fusion is None else self.fusion.scale()
+        self.odom_now = compose(self.odom, u)
+        return self.check.candidates(self.pose, self.odom, self.odom_now)
 
     def match(self, points: F64, guesses: list[F64], ang_step: float) -> tuple[F64, float]:
         """Correlative search then Gauss-Newton against the older active submap, around the
@@ -306,6 +319,9 @@ class Tracker:
         self._lost = self._lost + 1 if score < cfg.lost_score else 0
         if self._lost >= cfg.lost_scans:
             pose, score = self._relocalise(s, points, guess, ang_step, pose, score)
+        # a poor fit even after the wide search: kidnapped, or entering unmapped space
+        self.poor = self.poor + 1 if score < cfg.retry_score else 0
+        self.lost = self._lost >= cfg.lost_scans or self.poor >= cfg.lost_scans
         refined, score2, _ = sm.gauss_newton(
             s.likelihood, s.ox, s.oy, res, points, pose, cfg.gn_iterations, cfg.gn_prior_weight
         )
@@ -348,6 +364,18 @@ class Tracker:
             return found, found_score
         return pose, score
 
+    def restart(self, pose: F64) -> list[Submap]:
+        """Resume tracking at ``pose`` (local frame) after a global relocalisation: the active
+        submaps are finished (the next keyframe starts a new one there), the odometry check
+        forgets its reference (odometry did not see the robot carried off). Returns the
+        submaps finished."""
+        done = self.finish_all()
+        self.pose = np.asarray(pose, np.float64).copy()
+        self.check = OdometryCheck(self.cfg.doubt)
+        self.lost, self._lost, self.poor = False, 0, 0
+        self.n_relocalised += 1
+        return done
+
     def odometry_variance(self) -> tuple[float, float] | None:
         """Odometry's estimated variance per scan (translation per axis m^2, heading rad^2),
         None until the fusion has enough scans."""
@@ -356,10 +384,11 @@ class Tracker:
         return self.fusion.odometry_variance()
 
     def accept(self, pose: F64, odom_pose: F64) -> None:
-        self.pose, self.odom = pose, np.asarray(odom_pose, np.float64).copy()
+        self.pose, self.odom = pose, self.odom_now.copy()
+        self.odom_raw = np.asarray(odom_pose, np.float64).copy()
         self.check.accept(pose, self.odom, self.doubted)
         if self.fusion is not None:
-            self.fusion.add(self.odom)
+            self.fusion.add(self.odom_raw)  # raw: the fusion estimates the scale from it
 
     def insert(
         self, node: int, pose: F64, sensor_xy: F64, ends: F64, hits: NDArray[np.bool_]

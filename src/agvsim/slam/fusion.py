@@ -15,6 +15,10 @@ __all__ = ["OdometryFusion"]
 
 F64 = NDArray[np.float64]
 
+_MIN_SCALE_PATH_M = 5.0  # path in the window (m) before odometry's scale is estimated
+_SCALE_RANGE = (0.8, 1.25)  # a scale estimate outside is clamped (a wrong wheel radius)
+_SCALE_MEMORY = 1.0 - 1.0 / 3000.0  # weight of a scan's increment per scan since
+
 
 class OdometryFusion:
     """Weighs each scan match against the odometry prediction by their noises, estimated on
@@ -35,6 +39,15 @@ class OdometryFusion:
     so along a corridor odometry carries the pose.
     A robot with good wheel odometry keeps it; one whose odometry slips follows its scans.
 
+    Odometry's translation can be off by a constant factor (worn or mis-measured wheels, a
+    tyre pressure): a bias, not noise, which the gain would let through since odometry looks
+    precise from scan to scan. :meth:`scale` estimates that factor, the least-squares ``k``
+    of ``m ~ k o`` over the lag-``lag`` translation increments of the raw matches ``m`` and
+    of odometry ``o`` (robot frame; zero-mean match noise leaves it unbiased; a memory of
+    a few thousand scans, longer than the noises' window), and :class:`~.frontend.Tracker`
+    drives with odometry's increments scaled by it;
+    the noises are learnt from the scaled increments.
+
     Until it is :meth:`ready`, the pose is odometry's alone (and :class:`~.graph_slam.GraphSlam`
     processes those first scans again with the learnt noises, :meth:`preset`)."""
 
@@ -48,6 +61,8 @@ class OdometryFusion:
         self.odoms: list[F64] = []
         self.sharp: list[float] = []
         self._k = (1.0, 1.0, 1.0, 1.0)  # see estimate()
+        self._scale = 1.0  # see scale()
+        self._scale_sums = (0.0, 0.0, 0.0)  # sum m.o, sum o.o, path (m), with forgetting
         self._count = 0
         self._raw: F64 | None = None
         self._last_odom: F64 | None = None
@@ -80,6 +95,7 @@ class OdometryFusion:
             # it show odometry's drift (GraphSlam then processes these scans again)
             return guess.copy()
         if self.ready() and self._count % 10 == 0:
+            self._scale = self.estimate_scale()
             self._k = self.estimate()
         s_o, s_m, k_rot, s_or = self._k
         if step is not None:
@@ -96,6 +112,41 @@ class OdometryFusion:
         out[:2] = guess[:2] + v @ d
         out[2] = guess[2] + k_rot * wrap_scalar(match[2] - guess[2])
         return out
+
+    def scale(self) -> float:
+        """Odometry's translation scale as last estimated (1 until :meth:`ready`)."""
+        return self._scale
+
+    def estimate_scale(self) -> float:
+        """``sum(m . o) / sum(o . o)`` over lag increments (class docstring), each weighed
+        by ``_SCALE_MEMORY`` per scan since (a wheel's scale changes slowly: a memory longer
+        than the noises' window averages out the matches' noise and the places where they
+        are weak); 1 while the sums hold under ``_MIN_SCALE_PATH_M`` of path or ``k`` is
+        within 3 standard errors of 1 (odometry's noise, not a bias), clamped to
+        ``_SCALE_RANGE``."""
+        s_mo, s_oo, path = self._scale_sums
+        if path < _MIN_SCALE_PATH_M or s_oo <= 0.0:
+            return 1.0
+        k = s_mo / s_oo
+        # standard error of k: two matches' noise per increment, increments overlapping lag
+        # times (the match variance as last learnt)
+        if abs(k - 1.0) <= 3.0 * math.sqrt(2.0 * self._k[1] * self.lag / s_oo):
+            return 1.0
+        return min(max(k, _SCALE_RANGE[0]), _SCALE_RANGE[1])
+
+    def _update_scale_sums(self) -> None:
+        lag = self.lag
+        if len(self.matches) <= lag:
+            return
+        dm = between(self.matches[-1 - lag], self.matches[-1])[:2]
+        do = between(self.odoms[-1 - lag], self.odoms[-1])[:2]
+        s_mo, s_oo, path = self._scale_sums
+        f = _SCALE_MEMORY
+        self._scale_sums = (
+            f * s_mo + float(dm @ do),
+            f * s_oo + float(do @ do),
+            f * path + math.hypot(do[0], do[1]) / lag,
+        )
 
     def ready(self) -> bool:
         """Enough scans taken on the move to estimate the noises."""
@@ -125,6 +176,7 @@ class OdometryFusion:
         self.odoms.append(odom.copy())
         self._raw = None
         self._count += 1
+        self._update_scale_sums()
         keep = self.window + self.lag + 1
         if len(self.odoms) > keep:
             del self.odoms[0]
@@ -140,8 +192,8 @@ class OdometryFusion:
         m = np.asarray(self.matches[-n:])
         o = np.asarray(self.odoms[-n:])
         lag = min(self.lag, max((n - 1) // 3, 2))
-        v1 = _spread(m, o, 1)
-        vl = _spread(m, o, lag)
+        v1 = _spread(m, o, 1, self._scale)
+        vl = _spread(m, o, lag, self._scale)
         out = []
         for a, b in zip(v1, vl, strict=True):
             s_o = max(b - a, 0.0) / (lag - 1)
@@ -151,9 +203,11 @@ class OdometryFusion:
         return so_t, sm_t, so_r / (so_r + sm_r), so_r
 
 
-def _spread(m: F64, o: F64, lag: int) -> tuple[float, float]:
+def _spread(m: F64, o: F64, lag: int, scale: float = 1.0) -> tuple[float, float]:
     """Robust variances (translation per axis, heading) of the difference between the
-    increments of ``m`` and ``o`` over ``lag`` samples."""
-    e = between(between(o[:-lag], o[lag:]), between(m[:-lag], m[lag:]))
+    increments of ``m`` and ``o`` (translation times ``scale``) over ``lag`` samples."""
+    do = between(o[:-lag], o[lag:])
+    do[:, :2] *= scale
+    e = between(do, between(m[:-lag], m[lag:]))
     mad = 1.4826 * np.median(np.abs(e), axis=0)
     return float(np.mean(mad[:2] ** 2)), float(mad[2] ** 2)

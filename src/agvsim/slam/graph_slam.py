@@ -11,8 +11,12 @@ Per scan (:meth:`GraphSlam.update`), in the order of the paper (Hess et al. 2016
    relative pose, and odometry's with its learnt noise);
 3. look for loop closures: finished submaps within the search radius, branch-and-bound matching,
    verification (:mod:`.loop_closure`);
-4. when a loop closed, optimise the sparse pose graph (Levenberg-Marquardt with a Huber kernel,
-   :mod:`.posegraph`).
+4. when a loop closed, optimise the sparse pose graph (Levenberg-Marquardt, :mod:`.posegraph`):
+   a Huber kernel on local-SLAM and odometry edges, switchable constraints on loop closures
+   (dynamic covariance scaling, :class:`~.robust.RobustKernel`), so a false closure that got
+   through verification is switched off instead of bending the map. The switches' prior is
+   relaxed first and tightened in stages (graduated non-convexity): a right closure after a
+   long loop starts far from the drifted graph and would be switched off at once otherwise.
 
 The graph's variables are the global poses of keyframes and of submap origins. Every scan keeps
 its local pose and its keyframe, so its global pose after optimisation is
@@ -30,10 +34,16 @@ from numpy.typing import NDArray
 
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.frontend import MotionFilter, Submap, Tracker, TrackingConfig
-from agvsim.slam.loop_closure import LoopClosure, LoopConfig, LoopDetector
+from agvsim.slam.loop_closure import (
+    LoopClosure,
+    LoopConfig,
+    LoopDetector,
+    drift_bounds,
+    step_variances,
+)
 from agvsim.slam.mapping import OccupancyMap, render_occupancy
 from agvsim.slam.memory import release_free_heap
-from agvsim.slam.posegraph import PoseGraph, optimize
+from agvsim.slam.posegraph import PoseGraph, edge_chi2, optimize
 from agvsim.slam.se2 import between, compose, inverse
 
 __all__ = ["GraphSlam", "SlamConfig"]
@@ -54,7 +64,7 @@ class SlamConfig:
     The thesis's knobs: map resolution 20 cells/m is ``tracking.resolution_m``; max range 8 m
     is ``max_range_m`` (its 10 m lidar); the loop-closure threshold is ``loop.min_score`` (a
     mean likelihood in [0, 1]); the search radius 3 m is ``loop.search_radius_m``, widened by
-    ``loop.drift_per_m`` per metre travelled since the last closure."""
+    the uncertainty accumulated since the last closure (:func:`~.loop_closure.drift_bounds`)."""
 
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     loop: LoopConfig = field(default_factory=LoopConfig)
@@ -67,10 +77,14 @@ class SlamConfig:
     sigma_local_m: float = 0.02  # std of a local-SLAM relative pose (keyframe chain, submaps)
     sigma_local_rad: float = math.radians(0.5)
     huber_scale: float = 3.0  # in standard deviations
+    switchable_loops: bool = True  # loop closures as switchable constraints (else Huber)
+    switch_scale: float = 3.0  # closures within this many std keep their full weight
+    switch_stage_factor: float = 10.0  # graduated prior: chi2 bound divided by this per stage
     odometry_edges: bool = True  # keyframe-to-keyframe odometry edges, weighted by the noise
     odometry_floor_m: float = 0.002  # that tracking estimated (floors of their std per scan)
     odometry_floor_rad: float = math.radians(0.02)
     optimize_every: int = 50  # keyframes at least between two optimisations of small closures
+    global_relocalisation: bool = True  # search every finished submap when tracking is lost
 
 
 def _information(sigma_m: float, sigma_rad: float) -> F64:
@@ -143,16 +157,22 @@ class GraphSlam:
         self.scan_keyframe: list[int] = []
         self.loop_edges: list[LoopClosure] = []
         self._homes = np.zeros(0, np.int64)  # each keyframe's submap
-        self._path = np.zeros(0)  # distance travelled up to each keyframe (m)
-        self._path_at_loop = 0.0  # ... up to the last accepted loop closure
+        self._xy = np.zeros((0, 2))  # each keyframe's local position (m)
+        self._var_t = np.zeros(0)  # drift variance added by the step to each keyframe (m^2)
+        self._var_r = np.zeros(0)  # ... in heading (rad^2)
+        self._node_at_loop = 0  # the node of the last accepted loop closure
         self.n_optimisations = 0
         self._global_from_local = np.zeros(3)
         self._unoptimised: list[LoopClosure] = []
+        self._loop_edge_ids: list[int] = []  # graph edge index of every loop closure
+        self.switches = np.zeros(0)  # switch of every loop closure at the last optimisation
         self._last_optimised_node = 0
         self._info_local = _information(cfg.sigma_local_m, cfg.sigma_local_rad)
         self._scan_at_keyframe = 0
         self._odom = np.zeros(3)  # odometry pose of the scan being processed
         self._odom_doubted = False  # a scan since the last keyframe refuted odometry
+        self._relocated: int | None = None  # submap a global relocalisation found the scan in
+        self.n_global_relocalised = 0
 
     # ------------------------------------------------------------------ the algorithm
     def update(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
@@ -184,15 +204,31 @@ class GraphSlam:
         return self._step(timestamp, ranges, angles, odom_pose)
 
     def _step(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
-        self._odom = np.asarray(odom_pose, np.float64)
         points, ends, hits = self.scan_points(ranges, angles)
         guesses = self.tracker.predict(odom_pose)
-        pose, _ = self.tracker.match(points, guesses, self.angular_step(points))
+        self._odom = self.tracker.odom_now.copy()  # scale-corrected (odometry edges)
+        pose, score = self.tracker.match(points, guesses, self.angular_step(points))
+        # a scan that fits poorly is not mapped until it is clear whether the robot entered
+        # unmapped space (it goes on) or was carried off (found again in an old submap)
+        hold = (
+            self.cfg.global_relocalisation and 0 < self.tracker.poor < self.cfg.tracking.lost_scans
+        )
+        if self.tracker.lost and self._relocalise_due():
+            found = self.relocalise(points, pose, score)
+            if found is not None:
+                pose, self._relocated = found
+                self.tracker.restart(pose)
+                self.motion.last_pose = None  # a keyframe here, tied to where it was found
+                self.n_global_relocalised += 1
         self.tracker.accept(pose, odom_pose)
         self._odom_doubted |= self.tracker.odom_suspect
-        if self.motion.is_keyframe(pose, timestamp):
+        if not hold and self.motion.is_keyframe(pose, timestamp):
             node = self.add_keyframe(pose, points, ends, hits)
-            for closure in self.find_loop_closures(node):
+            closures = self.find_loop_closures(node)
+            if self._relocated is not None:
+                closures = self.relocation_closure(node, self._relocated) + closures
+                self._relocated = None
+            for closure in closures:
                 self.add_loop_closure(closure)
             self.keyframes[node].points = None  # only its own loop search needed them
             if self.loop_closed():
@@ -250,7 +286,7 @@ class GraphSlam:
         self.keyframes.append(kf)
         var = self.graph.add_node(compose(self._global_from_local, pose))
         self.node_var.append(var)
-        if node > 0:
+        if node > 0 and self._relocated is None:  # no chain edge across a relocalisation
             prev = self.keyframes[node - 1]
             self.graph.add_edge(
                 self.node_var[node - 1], var, between(prev.local, pose), self._info_local
@@ -279,12 +315,16 @@ class GraphSlam:
             )
         kf.submap = min(s.index for s in owners)
         if node >= len(self._homes):
-            self._homes = np.concatenate([self._homes, np.zeros(max(node, 64), np.int64)])
-            self._path = np.concatenate([self._path, np.zeros(max(node, 64))])
+            grow = max(node, 64)
+            self._homes = np.concatenate([self._homes, np.zeros(grow, np.int64)])
+            self._xy = np.concatenate([self._xy, np.zeros((grow, 2))])
+            self._var_t = np.concatenate([self._var_t, np.zeros(grow)])
+            self._var_r = np.concatenate([self._var_r, np.zeros(grow)])
         self._homes[node] = kf.submap
-        if node > 0:
+        self._xy[node] = pose[:2]
+        if node > 0 and self._relocated is None:
             step = between(self.keyframes[node - 1].local, pose)
-            self._path[node] = self._path[node - 1] + math.hypot(step[0], step[1])
+            self._var_t[node], self._var_r[node] = step_variances(self.cfg.loop, step)
         return node
 
     def find_loop_closures(self, node: int) -> list[LoopClosure]:
@@ -296,11 +336,11 @@ class GraphSlam:
         if kf.points is None:
             raise ValueError(f"keyframe {node}: its matching points were dropped")
         out: list[LoopClosure] = []
-        path = self._path[: node + 1]
-        since = path[node] - min(path[node], self._path_at_loop)
-        drift = self.cfg.loop.drift_per_m * np.minimum(path[node] - path, since)
-        for s, drift_m in self.loops.candidates(
-            node, est[:, :2], homes, drift, self.tracker.submaps
+        drift_m, drift_rad = drift_bounds(
+            self._xy, self._var_t, self._var_r, node, self._node_at_loop, self.cfg.loop.drift_sigmas
+        )
+        for s, bound_m, bound_rad in self.loops.candidates(
+            node, est[:, :2], homes, drift_m, self.tracker.submaps, drift_rad
         ):
             g_s = self.graph.poses[self.submap_var[s]]
             closure = self.loops.match(
@@ -311,19 +351,102 @@ class GraphSlam:
                 kf.local,
                 self.tracker.submaps[s],
                 g_s,
-                drift_m,
+                bound_m,
+                bound_rad,
             )
             if closure is not None:
                 out.extend(self.loops.verify(closure))
         return out
 
+    def _relocalise_due(self) -> bool:
+        """Global relocalisation is tried when tracking is lost, and again every ten times
+        ``lost_scans`` while it stays lost (a long stretch of unmapped space)."""
+        n = self.cfg.tracking.lost_scans
+        lost = max(self.tracker.poor, n)
+        return self.cfg.global_relocalisation and (lost - n) % (10 * n) == 0
+
+    def relocalise(self, points: F64, local: F64, local_score: float) -> tuple[F64, int] | None:
+        """Global relocalisation when tracking is lost: branch and bound of a subsample of the
+        scan's points (``tracking.global_points``) over the whole area of every finished
+        submap and every heading, the best place over all submaps (each search is pruned by
+        the best score so far), then all points refined there. Accepted only when the whole
+        scan scores at least ``tracking.global_min_score``, better than at the tracked pose
+        ``local`` (score ``local_score``) by ``doubt.margin``, and lies away from it (more
+        than ``relocalise_window_m``: nearer, tracking's own search had its chance). Returns
+        the local pose and the submap, or None."""
+        cfg = self.cfg.tracking
+        finished = [s for s in self.tracker.submaps if s.finished]
+        if not finished or len(points) < 3:
+            return None
+        sub = points[:: max(1, len(points) // cfg.global_points)]
+        coarse = 2.0 * self.angular_step(points)
+        res = cfg.resolution_m
+        best: tuple[F64, Submap] | None = None
+        best_score = 0.5 * cfg.global_min_score  # the subsample's bound to beat
+        for s in finished:
+            pyr = self.loops.pyramid(s)
+            h, w = pyr.shape[1:]
+            centre = np.array([s.ox + 0.5 * w * res, s.oy + 0.5 * h * res, 0.0])
+            pose, score = sm.branch_and_bound(
+                pyr,
+                s.ox,
+                s.oy,
+                res,
+                sub,
+                centre,
+                0.5 * max(h, w) * res,
+                math.pi,
+                coarse,
+                best_score,
+            )
+            if score > best_score:
+                best, best_score = (pose, s), score
+        if best is None:
+            return None
+        pose, s = best
+        pyr = self.loops.pyramid(s)
+        step = self.angular_step(points)
+        pose, _ = sm.branch_and_bound(
+            pyr, s.ox, s.oy, res, points, pose, 2 * res, coarse, step, 0.0
+        )
+        pose, score, _ = sm.gauss_newton(
+            pyr[0], s.ox, s.oy, res, points, pose, cfg.gn_iterations, 0.0
+        )
+        score = sm.score_pose(pyr[0], s.ox, s.oy, res, points, pose)
+        d = between(local, pose)
+        if (
+            score < max(cfg.global_min_score, local_score + cfg.doubt.margin)
+            or math.hypot(d[0], d[1]) <= cfg.relocalise_window_m
+        ):
+            return None
+        return pose, s.index
+
+    def relocation_closure(self, node: int, submap: int) -> list[LoopClosure]:
+        """The edge that ties a keyframe found by :meth:`relocalise` to the submap it was
+        found in (its only tie to the graph besides its new submap): the loop detector's
+        match there, unverified (the relocalisation's strict score stands for that)."""
+        kf, s = self.keyframes[node], self.tracker.submaps[submap]
+        g_s = self.graph.poses[self.submap_var[submap]]
+        guess = compose(g_s, between(s.origin, kf.local))  # where the match put it
+        # the local frame continues from the found pose: map it to where that submap is
+        self._global_from_local = compose(guess, inverse(kf.local))
+        self.graph.poses[self.node_var[node]] = guess
+        for new in self.tracker.active:
+            self.graph.poses[self.submap_var[new.index]] = compose(
+                self._global_from_local, new.origin
+            )
+        assert kf.points is not None
+        c = self.loops.match(node, kf.points, kf.ang_step, guess, kf.local, s, g_s)
+        return [] if c is None else [c]
+
     def add_loop_closure(self, c: LoopClosure) -> None:
-        """Submap -> node edge with the match as measurement (Huber-robust in optimisation)."""
+        """Submap -> node edge with the match as measurement (switchable in optimisation)."""
+        self._loop_edge_ids.append(self.graph.n_edges)
         self.graph.add_edge(
             self.submap_var[c.submap], self.node_var[c.node], c.measurement, c.information
         )
         self.loop_edges.append(c)
-        self._path_at_loop = float(self._path[c.node])
+        self._node_at_loop = c.node
         self._unoptimised.append(c)
 
     def loop_closed(self) -> bool:
@@ -334,16 +457,43 @@ class GraphSlam:
         big = any(not self.loops.agrees(between(c.estimate, c.matched)) for c in self._unoptimised)
         return big or len(self.keyframes) - self._last_optimised_node >= self.cfg.optimize_every
 
+    def switchable_edges(self) -> NDArray[np.bool_]:
+        """(E,) True for the graph's loop-closure edges (all False if they are not switchable)."""
+        mask = np.zeros(self.graph.n_edges, dtype=bool)
+        if self.cfg.switchable_loops:
+            mask[np.asarray(self._loop_edge_ids, dtype=np.int64)] = True
+        return mask
+
+    def switch_stages(self, mask: NDArray[np.bool_]) -> list[float]:
+        """Switch scales (std) to optimise with in turn: from one that keeps every closure
+        whole at the current poses down to ``switch_scale``, divided by
+        ``switch_stage_factor`` in chi2 per stage (graduated non-convexity)."""
+        final = self.cfg.switch_scale**2
+        worst = float(edge_chi2(self.graph)[mask].max()) if mask.any() else 0.0
+        stages = []
+        while worst > final:
+            stages.append(math.sqrt(worst))
+            worst /= self.cfg.switch_stage_factor
+        return [*stages, math.sqrt(final)]
+
     def optimise(self, max_iterations: int = 20) -> None:
-        """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed)."""
-        result = optimize(
-            self.graph,
-            robust="huber",
-            robust_scale=self.cfg.huber_scale,
-            max_iterations=max_iterations,
-            tolerance=1e-6,
-        )
-        self.graph.poses = result.poses
+        """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed),
+        loop closures switchable (:meth:`switch_stages`)."""
+        mask = self.switchable_edges()
+        stages = self.switch_stages(mask)
+        for k, scale in enumerate(stages):
+            final = k == len(stages) - 1
+            result = optimize(
+                self.graph,
+                robust="huber",
+                robust_scale=self.cfg.huber_scale,
+                max_iterations=max_iterations if final else min(max_iterations, 10),
+                tolerance=1e-6 if final else 1e-4,
+                switchable=mask,
+                switch_scale=scale,
+            )
+            self.graph.poses = result.poses
+        self.switches = result.switches[mask]
         last = len(self.keyframes) - 1
         g_last = self.graph.poses[self.node_var[last]]
         self._global_from_local = compose(g_last, inverse(self.keyframes[last].local))

@@ -1,11 +1,21 @@
 """Loop closure: candidates within a search radius, branch-and-bound matching, verification.
 
 For a new keyframe ``i`` with global estimate ``g_i``, every finished submap ``s`` holding a
-keyframe within ``search_radius_m`` of ``g_i`` (and none of the last ``min_node_gap`` keyframes)
-is a candidate. The scan is placed in the submap's frame at the graph's guess
-``x_0 = o_s * (G_s^-1 * g_i)`` (``o_s``: submap origin in the local frame it was built in,
-``G_s``: its global pose) and matched with :func:`~.scan_matching.branch_and_bound` over a
-``+-window_m``, ``+-window_rad`` window, then refined by Gauss-Newton.
+keyframe ``k`` within ``search_radius_m + b_k`` of ``g_i`` (and none of the last
+``min_node_gap`` keyframes) is a candidate. ``b_k`` bounds how far the graph's estimate of
+``k`` relative to ``i`` may be off: ``drift_sigmas`` standard deviations of the relative pose's
+covariance, propagated along the keyframe chain from ``k`` (or from the last accepted closure,
+which holds the graph there) to ``i`` (:func:`drift_bounds`). Each step adds a random walk in
+translation and heading that grows with the distance driven and the angle turned, and a
+heading error at step ``j`` swings everything after it by the lever arm ``|p_i - p_j|``: the
+search grows fast on long loops and not on a robot turning on the spot, with no fixed radius.
+The match's windows grow the same way, in translation and in heading.
+
+The scan is placed in the submap's frame at the graph's guess ``x_0 = o_s * (G_s^-1 * g_i)``
+(``o_s``: submap origin in the local frame it was built in, ``G_s``: its global pose) and
+matched with :func:`~.scan_matching.branch_and_bound` over a ``+-(window_m + b_k)``,
+``+-(window_rad + b_k,theta)`` window (``b_k,theta`` the heading bound), then refined by
+Gauss-Newton.
 
 A closure is *verified* when
 
@@ -34,7 +44,7 @@ from agvsim.slam.frontend import Submap
 from agvsim.slam.memory import HeapReleaser
 from agvsim.slam.se2 import between, compose
 
-__all__ = ["LoopClosure", "LoopConfig", "LoopDetector"]
+__all__ = ["LoopClosure", "LoopConfig", "LoopDetector", "drift_bounds", "step_variances"]
 
 F64 = NDArray[np.float64]
 
@@ -46,9 +56,14 @@ class LoopConfig:
     search_radius_m: float = 3.0  # the thesis's search radius
     window_m: float = 1.5  # branch-and-bound window around the graph's guess, +-
     window_rad: float = math.radians(15.0)
-    drift_per_m: float = 0.02  # drift bound of local SLAM per metre travelled (m/m)
-    drift_rad_per_m: float = math.radians(5.0)  # extra angular window per metre of drift bound
-    max_drift_m: float = 8.0
+    # local SLAM's drift as random walks (std): translation per sqrt(metre driven), heading per
+    # sqrt(metre driven) and per sqrt(radian turned); see drift_bounds
+    drift_m_per_sqrt_m: float = 0.02
+    drift_rad_per_sqrt_m: float = math.radians(0.1)
+    drift_rad_per_sqrt_rad: float = 0.01
+    drift_sigmas: float = 3.0  # search bounds: this many standard deviations
+    max_drift_m: float = 8.0  # caps of the bounds (the matching cost grows with the window)
+    max_drift_rad: float = math.radians(45.0)
     min_score: float = 0.55  # the thesis's loop-closure threshold, as a mean likelihood
     min_node_gap: int = 80  # keyframes between a node and the submaps it may close on
     max_candidates: int = 2  # submaps matched per keyframe, nearest first
@@ -99,29 +114,33 @@ class LoopDetector:
         node_submap: NDArray[np.int64],
         drift_m: F64,
         submaps: list[Submap],
-    ) -> list[tuple[int, float]]:
+        drift_rad: F64 | None = None,
+    ) -> list[tuple[int, float, float]]:
         """Finished submaps with a keyframe ``k`` within ``search_radius_m + drift_m[k]`` of
-        ``node``, nearest first, with that drift bound; ``node_xy (N, 2)`` global positions,
-        ``node_submap (N,)`` each node's submap, ``drift_m (N,)`` how far the graph's estimate
-        of each node relative to ``node`` may be off."""
+        ``node``, nearest first, with that keyframe's drift bounds (m, rad); ``node_xy (N, 2)``
+        global positions, ``node_submap (N,)`` each node's submap, ``drift_m (N,)`` and
+        ``drift_rad (N,)`` how far the graph's estimate of each node relative to ``node`` may
+        be off (:func:`drift_bounds`; capped at ``max_drift_m``, ``max_drift_rad``)."""
         last = node - self.cfg.min_node_gap
         if last <= 0:
             return []
         d = np.hypot(*(node_xy[:last] - node_xy[node]).T)
         drift = np.minimum(drift_m[:last], self.cfg.max_drift_m)
+        turn = np.zeros(last) if drift_rad is None else drift_rad[:last]
+        turn = np.minimum(turn, self.cfg.max_drift_rad)
         near = np.nonzero(d <= self.cfg.search_radius_m + drift)[0]
         if near.size == 0:
             return []
-        out: list[tuple[int, float]] = []
+        out: list[tuple[int, float, float]] = []
         for k in near[np.argsort(d[near])]:
             s = int(node_submap[k])
             if all(s != o[0] for o in out) and submaps[s].finished and max(submaps[s].nodes) < last:
-                out.append((s, float(drift[k])))
+                out.append((s, float(drift[k]), float(turn[k])))
                 if len(out) == self.cfg.max_candidates:
                     break
         return out
 
-    def _pyramid(self, s: Submap) -> np.ndarray:
+    def pyramid(self, s: Submap) -> np.ndarray:
         """The submap's max pyramid (level 0: its likelihood field), from a cache of at most
         ``pyramid_cache_mib`` (least recently used first out): memory bounded by the map, not
         by the log."""
@@ -149,14 +168,16 @@ class LoopDetector:
         s: Submap,
         g_submap: F64,
         drift_m: float = 0.0,
+        drift_rad: float = 0.0,
     ) -> LoopClosure | None:
         """Branch-and-bound + Gauss-Newton of ``points`` (robot frame) in submap ``s``, the
-        window widened by the drift bound; None when the score stays under ``min_score``."""
+        windows widened by the drift bounds (m, rad); None when the score stays under
+        ``min_score``."""
         cfg = self.cfg
         win_m = cfg.window_m + drift_m
-        win_rad = cfg.window_rad + drift_m * cfg.drift_rad_per_m
+        win_rad = cfg.window_rad + drift_rad
         guess = compose(s.origin, between(g_submap, g_node))
-        pyramid = self._pyramid(s)
+        pyramid = self.pyramid(s)
         field = pyramid[0]
         pose, score = sm.branch_and_bound(
             pyramid,
@@ -242,3 +263,45 @@ def _shape_information(hess: F64, rot_rad: float, sigma_m: float, floor: float) 
     w, v = np.linalg.eigh(h)
     w = np.maximum(w, floor * w[-1])
     return (v * w) @ v.T
+
+
+def step_variances(cfg: LoopConfig, step: F64) -> tuple[float, float]:
+    """Variances (translation per axis m^2, heading rad^2) that local SLAM's drift adds over
+    one keyframe step ``step`` (3,): random walks in the distance driven and the angle turned
+    (:class:`LoopConfig` ``drift_*``)."""
+    dist, turn = math.hypot(step[0], step[1]), abs(step[2])
+    var_t = cfg.drift_m_per_sqrt_m**2 * dist
+    var_r = cfg.drift_rad_per_sqrt_m**2 * dist + cfg.drift_rad_per_sqrt_rad**2 * turn
+    return var_t, var_r
+
+
+def drift_bounds(
+    xy: F64, var_t: F64, var_r: F64, node: int, anchor: int, sigmas: float
+) -> tuple[F64, F64]:
+    """How far the graph's estimate of each keyframe ``k <= node`` relative to ``node`` may be
+    off: ``sigmas`` standard deviations of the relative pose, ``(bound_m (node+1,), bound_rad
+    (node+1,))``, after first-order propagation along the chain of keyframe steps.
+
+    ``xy (N, 2)`` keyframe positions along the chain (local tracking frame), ``var_t (N,)``
+    and ``var_r (N,)`` the variances each step ``j - 1 -> j`` adds (:func:`step_variances`).
+    Step ``j``'s heading error swings the rest of the chain about ``p_j``, moving ``node`` by
+    the lever arm ``|p_node - p_j|``, so::
+
+        var_xy(k) = sum_{j in (max(k, anchor), node]} 2 var_t[j] + var_r[j] |p_node - p_j|^2
+        var_th(k) = sum_{j in (max(k, anchor), node]} var_r[j]
+
+    (``var_xy`` is the trace of the 2x2 position covariance: the bound is ``sigmas *
+    sqrt(var_xy)``). Keyframes before ``anchor`` (the node of the last accepted loop closure,
+    where the graph is held) share ``anchor``'s bound."""
+    lo = max(min(anchor, node), 0)
+    j = np.arange(lo + 1, node + 1)
+    lever2 = np.sum((xy[j] - xy[node]) ** 2, axis=1)
+    add_xy = 2.0 * var_t[j] + var_r[j] * lever2
+    # sums over j > k: reversed cumulative sums, then flat before the anchor
+    tail_xy = np.concatenate([np.cumsum(add_xy[::-1])[::-1], [0.0]])
+    tail_th = np.concatenate([np.cumsum(var_r[j][::-1])[::-1], [0.0]])
+    var_xy = np.empty(node + 1)
+    var_th = np.empty(node + 1)
+    var_xy[:lo], var_th[:lo] = tail_xy[0], tail_th[0]
+    var_xy[lo:], var_th[lo:] = tail_xy, tail_th
+    return sigmas * np.sqrt(var_xy), sigmas * np.sqrt(var_th)

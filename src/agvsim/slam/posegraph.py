@@ -43,7 +43,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
 from agvsim.slam.posegraph_init import chordal_poses
-from agvsim.slam.robust import RobustKernel, robust_cost_and_weights
+from agvsim.slam.robust import RobustKernel, robust_cost_and_weights, switch_values
 from agvsim.slam.se2 import rotation_matrices, wrap_angle
 
 __all__ = [
@@ -314,6 +314,9 @@ class OptimizeResult:
     converged: bool
     cost_initial: float
     cost_final: float
+    # (E,) switch of every edge at the result: 1 for edges that are not switchable, in [0, 1]
+    # for switchable ones (0: the edge was found inconsistent with the rest and switched off)
+    switches: F64 = field(default_factory=lambda: np.zeros(0))
 
 
 class _NormalEquations:
@@ -421,6 +424,8 @@ def optimize(
     initial_damping: float = 1e-4,
     verbose: Callable[[IterationInfo], None] | None = None,
     initialisation: Initialisation | str = Initialisation.GIVEN,
+    switchable: ArrayLike | None = None,
+    switch_scale: float = 1.0,
 ) -> OptimizeResult:
     """Minimise ``sum_k rho(e_k^T Omega_k e_k)`` over the free poses by Levenberg-Marquardt.
 
@@ -433,10 +438,25 @@ def optimize(
     ``initialisation`` picks the start (:class:`Initialisation`; ``chi2_initial`` is the
     given poses' chi2 whatever the start). Does not modify ``graph``; the result's ``poses``
     are a new array.
+
+    ``switchable`` (E,) bools marks edges that may be wrong, loop closures typically: they get
+    switchable constraints (:attr:`RobustKernel.DCS` with ``Phi = switch_scale^2``) instead
+    of ``robust``, and the result reports their switches (a false closure's goes to 0).
     """
     kernel = RobustKernel(robust)
     if robust_scale <= 0.0:
         raise ValueError(f"robust_scale must be positive, got {robust_scale}")
+    if switch_scale <= 0.0:
+        raise ValueError(f"switch_scale must be positive, got {switch_scale}")
+    switch = np.zeros(graph.n_edges, dtype=bool)
+    if switchable is not None:
+        switch = np.asarray(switchable, dtype=bool)
+        if switch.shape != (graph.n_edges,):
+            raise ValueError(
+                f"switchable must have one flag per edge, shape ({graph.n_edges},); "
+                f"got {switch.shape}"
+            )
+    any_switch = bool(switch.any())
     t0 = time.perf_counter()
     chi2_given = chi2(graph) if graph.n_edges else 0.0
     poses = initial_guess(graph, initialisation, fixed)
@@ -448,7 +468,18 @@ def optimize(
         e, a, b = _errors_jacobians(p, ei, ej, z, jac)
         s = np.einsum("ka,kab,kb->k", e, om, e)
         cost, w = robust_cost_and_weights(s, kernel, robust_scale)
+        if any_switch:
+            c_sw, w_sw = robust_cost_and_weights(s[switch], RobustKernel.DCS, switch_scale)
+            cost, w = cost.copy(), w.copy()
+            cost[switch], w[switch] = c_sw, w_sw
         return float(cost.sum()), float(s.sum()), w, e, a, b
+
+    def switches(e: F64) -> F64:
+        out = np.ones(graph.n_edges)
+        if any_switch:
+            s = np.einsum("ka,kab,kb->k", e[switch], om[switch], e[switch])
+            out[switch] = switch_values(s, switch_scale)
+        return out
 
     cost, c2, w, e, a, b = evaluate(poses, True)
     cost0, chi2_0 = cost, chi2_given
@@ -456,7 +487,7 @@ def optimize(
     converged = False
     it = 0
     if neq.n == 0 or graph.n_edges == 0 or cost == 0.0:  # nothing to move, or an exact fit
-        return OptimizeResult(poses, chi2_0, c2, 0, True, cost0, cost0)
+        return OptimizeResult(poses, chi2_0, c2, 0, True, cost0, cost0, switches(e))
     h, grad = neq.assemble(a, b, w[:, None, None] * om, e)
     for it in range(1, max_iterations + 1):
         dx = neq.solve(h, grad, lam)
@@ -492,4 +523,4 @@ def optimize(
         if lam > 1e16:  # no descent direction left: at a (local) minimum to machine precision
             converged = True
             break
-    return OptimizeResult(poses, chi2_0, c2, it, converged, cost0, cost)
+    return OptimizeResult(poses, chi2_0, c2, it, converged, cost0, cost, switches(e))
