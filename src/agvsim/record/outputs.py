@@ -27,7 +27,9 @@ DYNAMICS_COLUMNS = [
     f"wheel{k + 1}_{q}" for q in ("torque_nm", "slip_m_s", "power_w") for k in range(W_MAX)
 ]
 # appended only when a controller estimates its pose (the route follower, docs/guidance.md):
-# the estimate and its distance from the ground truth, empty for the other robots
+# the estimate the controller acted on in the row's step and its distance from the ground
+# truth of that observation (the step's start: one step before the row's x, y), empty for
+# the other robots
 ESTIMATE_COLUMNS = ["est_x", "est_y", "est_theta", "est_error_m"]
 
 
@@ -74,7 +76,7 @@ class TrajectoryWriter:
             if self._dyn:
                 line += "," + self._dynamics_cells(i)
             if self._est:
-                line += "," + self._estimate_cells(i, p)
+                line += "," + self._estimate_cells(i)
             lines.append(line + "\n")
         self._f.write("".join(lines))
         self.rows += len(lines)
@@ -90,11 +92,12 @@ class TrajectoryWriter:
             cells += [f"{arr[i, k]:.6g}" if k < n else "" for k in range(W_MAX)]
         return ",".join(cells)
 
-    def _estimate_cells(self, i: int, truth: np.ndarray) -> str:
-        est = getattr(self._est.get(i), "estimate", None)
+    def _estimate_cells(self, i: int) -> str:
+        ctrl = self._est.get(i)
+        est = getattr(ctrl, "estimate", None)
         if est is None:
             return ",,,"
-        err = math.hypot(est[0] - truth[0], est[1] - truth[1])
+        err = float(getattr(ctrl, "pose_error_m", math.nan))
         return f"{est[0]:.6f},{est[1]:.6f},{est[2]:.6f},{err:.6f}"
 
     def close(self) -> None:
