@@ -234,3 +234,36 @@ def test_trajectory_csv_carries_the_estimate_and_its_error(tmp_path):
     assert max(float(r["est_error_m"]) for r in rows[1:]) == pytest.approx(
         ctrl["pose_error_max_m"], abs=1e-5
     )
+
+
+def test_run_mcap_carries_intensities_the_estimate_and_the_line_reading(tmp_path):
+    from agvsim.record.mcap_reader import Recording
+
+    run_scenario(SCENARIOS / "guidance_reflectors.yaml", tmp_path / "r", duration_s=1.0,
+                 plot=False)  # fmt: skip
+    run_scenario(SCENARIOS / "guidance_tape.yaml", tmp_path / "t", duration_s=1.0, plot=False)
+    rec = Recording(tmp_path / "r" / "run.mcap")
+    if True:
+        scans = rec.messages("/agv/lidar")
+        assert len(scans) == 11  # 10 Hz over 1 s, and t = 0
+        for _, m in scans:
+            inten = np.asarray(m.intensities)
+            assert inten.shape == (1080,)
+            assert (inten == REFLECTOR_INTENSITY).sum() >= 10
+        est = rec.messages("/agv/localization")
+        truth = rec.messages("/agv/ground_truth")
+        assert len(est) == 50 and len(truth) == 51  # the estimate: from the first step on
+        # the estimate of each observation's time follows the truth there within the
+        # filter's accuracy
+        at = {round(t, 6): m for t, m in truth}
+        assert [round(t, 6) for t, _ in est] == sorted(at)[:50]
+        for t, e in est:
+            pe, pg = e.pose.pose.position, at[round(t, 6)].pose.pose.position
+            assert math.hypot(pe.x - pg.x, pe.y - pg.y) < 0.03
+    rec = Recording(tmp_path / "t" / "run.mcap")
+    if True:
+        lines = rec.messages("/agv/line")
+        assert len(lines) == 51
+        # the robot starts on the tape: one run, near the bar's middle
+        assert all(len(m.data) == 1 and abs(m.data[0]) < 0.02 for _, m in lines)
+        assert "/agv/localization" not in rec.topics

@@ -90,7 +90,8 @@ class RouteFollower:
     def reset(self) -> None:
         self.pursuit.reset()
         self.state_name = "follow"
-        self.estimate: np.ndarray | None = None
+        self.estimate: np.ndarray | None = None  # of the last observation, at its time:
+        self.estimate_stamp_s = math.nan
         self.pose_error_m = math.nan
         self._errors: list[float] = []
         self._prev_odom: np.ndarray | None = None
@@ -151,7 +152,7 @@ class RouteFollower:
     # ------------------------------------------------------------------ control
     def step(self, obs: Observation) -> object:
         est = self._localize(obs)
-        self.estimate = est
+        self.estimate, self.estimate_stamp_s = est, obs.t_s
         truth = obs.true_pose
         self.pose_error_m = math.hypot(est[0] - truth[0], est[1] - truth[1])
         if self.state_name != "reached":
