@@ -267,3 +267,26 @@ def test_run_mcap_carries_intensities_the_estimate_and_the_line_reading(tmp_path
         # the robot starts on the tape: one run, near the bar's middle
         assert all(len(m.data) == 1 and abs(m.data[0]) < 0.02 for _, m in lines)
         assert "/agv/localization" not in rec.topics
+
+
+def test_the_3d_view_draws_tape_codes_and_reflectors_where_the_world_has_them():
+    from agvsim.app.guidance_view import guidance_shapes
+
+    world = _sim(_data("guidance_tape")).world
+    tape = guidance_shapes(world)
+    # the closed loop: 4 straights + 4 arcs of chords (within 1 mm of the arcs, so a bit
+    # short of 20 + 2 pi m); its drawn length is the tape's
+    d = tape.tape_segments[:, 1, :2] - tape.tape_segments[:, 0, :2]
+    drawn = float(np.hypot(d[:, 0], d[:, 1]).sum())
+    assert drawn == pytest.approx(world.tape.length_m, abs=1e-4)
+    assert 20 + 2 * math.pi - 0.005 < drawn < 20 + 2 * math.pi
+    assert tape.tape_width_m == 0.05 and len(tape.spots) == 4
+    assert len(tape.code_faces) == 0 and len(tape.reflectors) == 0
+    codes = guidance_shapes(_sim(_data("guidance_floor_codes")).world)
+    assert len(codes.code_faces) == 2 * 140 and len(codes.code_vertices) == 4 * 140
+    # the first code's square: 5 cm wide, centred on the grid's origin (-6.5, -4.5)
+    sq = codes.code_vertices[:4, :2]
+    np.testing.assert_allclose(sq.mean(axis=0), [-6.5, -4.5], atol=1e-12)
+    np.testing.assert_allclose(np.ptp(sq, axis=0), [0.05, 0.05], atol=1e-12)
+    refl = guidance_shapes(_sim(_data("guidance_reflectors_blind_spot")).world)
+    assert len(refl.reflectors) == 8 and refl.reflector_width_m == 0.1
