@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from hypothesis import given
+from hypothesis import strategies as st
 
 from agvsim.runner import run_scenario
 from agvsim.scenario import ScenarioError, build, parse_scenario
@@ -290,3 +292,21 @@ def test_the_3d_view_draws_tape_codes_and_reflectors_where_the_world_has_them():
     np.testing.assert_allclose(np.ptp(sq, axis=0), [0.05, 0.05], atol=1e-12)
     refl = guidance_shapes(_sim(_data("guidance_reflectors_blind_spot")).world)
     assert len(refl.reflectors) == 8 and refl.reflector_width_m == 0.1
+
+
+finite = st.floats(-50, 50, allow_nan=False)
+angle = st.floats(-math.pi, math.pi, allow_nan=False)
+
+
+@given(finite, finite, angle, finite, finite, angle)
+def test_the_odometry_between_fixes_carries_a_pose_exactly(ax, ay, at, bx, by, bt):
+    """The floor-code estimate is fix (+) (odom_then^-1 odom_now): composing a pose with
+    its relative pose to another gives the other back."""
+    from agvsim.control.route_follow import compose, relative
+
+    a, b = np.array([ax, ay, at]), np.array([bx, by, bt])
+    back = compose(a, relative(a, b))
+    np.testing.assert_allclose(back[:2], b[:2], atol=1e-9)
+    assert abs(math.remainder(back[2] - b[2], 2 * math.pi)) < 1e-12
+    # relative of a pose to itself is no motion
+    np.testing.assert_allclose(relative(a, a), 0.0, atol=1e-12)
