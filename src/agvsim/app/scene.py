@@ -348,7 +348,8 @@ def _sensor_kinds(config: dict, table) -> np.ndarray:
     kinds = []
     for r in config["robots"]:
         for s in r.get("sensors", []):
-            kinds.append(s.get("type") == "lidar")
+            if s.get("type") in ("lidar", "rangers"):  # the range sensors' slots only
+                kinds.append(s.get("type") == "lidar")
     out = np.array(kinds, dtype=bool)
     if len(out) != table.count:  # config and sim out of step for a moment: colour by beams
         out = np.array([sp.num_beams > 8 for sp in table.specs], dtype=bool)
