@@ -20,6 +20,8 @@ evade          ``EvadeConfig``       :class:`agvsim.control.pursuit.Evader`
 teleop         ``TeleopConfig``      :class:`agvsim.control.teleop.Teleop`
 wall_follow    ``WallFollowConfig``  :class:`agvsim.control.wall_follow.WallFollower`
 marker_search  ``MarkerSearchConfig``  :class:`agvsim.control.marker_search.MarkerSearch`
+line_follow    ``LineFollowConfig``  :class:`agvsim.control.line_follow.LineFollower`
+route          ``RouteConfig``       :class:`agvsim.control.route_follow.RouteFollower`
 =============  ====================  ======================================================
 """
 
@@ -43,6 +45,7 @@ from agvsim.control.pursuit import Evader, Pursuer, WallGuard
 from agvsim.control.teleop import Teleop
 from agvsim.control.wall_follow import WallFollower
 from agvsim.scenario_controllers import BASIC, Behaviour, ControllerConfigBase
+from agvsim.scenario_guidance import LineFollowConfig, RouteConfig, build_line_follow, build_route
 from agvsim.world.loaders import MAX_CELLS
 
 _Cell = Annotated[int, Field(ge=0, le=10_000_000)]  # numba takes 64-bit integers only
@@ -412,4 +415,7 @@ BEHAVIOURS: dict[str, Behaviour] = {
     "teleop": Behaviour(TeleopConfig, build=build_teleop),  # the user drives
     "wall_follow": Behaviour(WallFollowConfig, build=build_wall_follow, keep_clear=True),
     "marker_search": Behaviour(MarkerSearchConfig, build=build_marker_search, keep_clear=True),
+    # industrial guidance (docs/guidance.md)
+    "line_follow": Behaviour(LineFollowConfig, build=build_line_follow),
+    "route": Behaviour(RouteConfig, build=build_route),
 }

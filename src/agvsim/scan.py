@@ -39,6 +39,9 @@ class LaserScan:
     ranges: NDArray[np.float64]  # (B,) m; inf no return, -inf closer than range_min_m
     mount_pose: NDArray[np.float64] = field(default_factory=_no_mount)  # (3,) T_robot_sensor
     odom_pose: NDArray[np.float64] | None = None  # (3,) robot base, odometry frame (logs)
+    # (B,) return strength (sensor_msgs/LaserScan.intensities): high on a retro-reflector,
+    # 0 without a return; None when the sensor reports none (a world without reflectors)
+    intensities: NDArray[np.float64] | None = None
 
     @property
     def angles_rad(self) -> NDArray[np.float64]:

@@ -25,6 +25,15 @@ from agvsim.kinematics import wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
 from agvsim.scenario_controllers import cone_beams as cone_beams  # re-exported
 from agvsim.scenario_dynamics import dynamics_spec, floor_spec
+from agvsim.scenario_guidance import (
+    FloorCameraConfig,
+    LineSensorConfig,
+    build_floor_codes,
+    build_reflectors,
+    build_tape,
+    floor_camera_spec,
+    line_sensor_spec,
+)
 from agvsim.scenario_limits import (
     MAX_MAGNITUDE,
     Limits,
@@ -46,6 +55,8 @@ from agvsim.scenario_schema import (
 from agvsim.scenario_schema import _models_in as _models_in  # re-exported
 from agvsim.scenario_schema import parse_robot as parse_robot  # re-exported
 from agvsim.sensors.camera import CameraSpec
+from agvsim.sensors.floor_codes import FloorCameraSpec
+from agvsim.sensors.line_sensor import LineSensorSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sim.engine import Binding, Simulation
 from agvsim.sim.spec import (
@@ -350,16 +361,32 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
     offset = rc.body.offset_x_m
     if offset is None:
         offset = float(getattr(model, "wheelbase_m", 0.0)) / 2.0
-    sensors, cameras = [], []
+    sensors: list[RangeSensorSpec] = []
+    cameras: list[CameraSpec] = []
+    lines: list[LineSensorSpec] = []
+    floor_cams: list[FloorCameraSpec] = []
     for k, sc in enumerate(rc.sensors):
         try:
             if isinstance(sc, CameraConfig):
                 cameras.append(_camera(sc, rc, model, offset))
+            elif isinstance(sc, LineSensorConfig):
+                lines.append(line_sensor_spec(sc, sc.name or ("line" if not lines else f"line{k}")))
+            elif isinstance(sc, FloorCameraConfig):
+                floor_cams.append(
+                    floor_camera_spec(
+                        sc, sc.name or ("floor_camera" if not floor_cams else f"floor_camera{k}")
+                    )
+                )
             else:
                 sensors.append(_sensor(sc, offset, default_rate_hz(sc.type, dt_s)))
         except ValueError as err:
             raise ScenarioError("", [f"{where}.sensors[{k}]: {err}"]) from None
-    names = [s.name for s in sensors] + [c.name for c in cameras]
+    names = [
+        *(s.name for s in sensors),
+        *(c.name for c in cameras),
+        *(ln.name for ln in lines),
+        *(f.name for f in floor_cams),
+    ]
     if len(set(names)) != len(names):
         raise ScenarioError(
             "", [f"{where}.sensors: names must be unique (set 'name'), got {names}"]
@@ -382,6 +409,8 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
         ),
         color=rc.color,
         dynamics=dynamics_spec(rc.dynamics, offset),
+        line_sensors=tuple(lines),
+        floor_cameras=tuple(floor_cams),
     )
     if spec.dynamics is not None:
         try:
@@ -392,7 +421,12 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
 
 
 def _bindings(
-    sc: Scenario, specs: list[RobotSpec], base_dir: Path, grid: OccupancyGrid, boxes: np.ndarray
+    sc: Scenario,
+    specs: list[RobotSpec],
+    base_dir: Path,
+    grid: OccupancyGrid,
+    boxes: np.ndarray,
+    world: World | None = None,
 ) -> list[Binding]:
     """Every robot's controller, built one way through the registry (agvsim.behaviours):
     one binding a robot, then one a group for batched types (robots sharing a config)."""
@@ -402,7 +436,7 @@ def _bindings(
     groups: dict[tuple, list[ControllerContext]] = {}
     for i, rc in enumerate(sc.robots):
         cfg, kind = rc.controller, BEHAVIOURS[rc.controller.type]
-        ctx = ControllerContext(i, specs[i], grid, names, base_dir, static)
+        ctx = ControllerContext(i, specs[i], grid, names, base_dir, static, world)
         try:
             if kind.check is not None:
                 kind.check(cfg, ctx)
@@ -480,8 +514,8 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
         look = build_appearance(sc.world, grid)
     except ValueError as err:
         raise ScenarioError("", [f"world.{err}"]) from None
-    world = World(grid, boxes, look, floor=floor_spec(sc.world.floor))
-    bindings = _bindings(sc, specs, base, grid, boxes)
+    world = World(grid, boxes, look, floor=floor_spec(sc.world.floor), **_guidance_world(sc))
+    bindings = _bindings(sc, specs, base, grid, boxes, world)
     sim = Simulation(
         world,
         specs,
@@ -493,6 +527,24 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     )
     _check_placement(sim)
     return sim
+
+
+def _guidance_world(sc: Scenario) -> dict:
+    """The world's tape, floor codes and reflectors (docs/guidance.md), where given."""
+    w, out = sc.world, {}
+    makers: tuple[tuple[str, Any, Any], ...] = (
+        ("tape", w.tape, build_tape),
+        ("floor_codes", w.floor_codes, build_floor_codes),
+        ("reflectors", w.reflectors, build_reflectors),
+    )
+    for key, cfg, make in makers:
+        if cfg is None:
+            continue
+        try:
+            out[key] = make(cfg)
+        except ValueError as err:
+            raise ScenarioError("", [f"world.{key}: {err}"]) from None
+    return out
 
 
 def _check_placement(sim: Simulation) -> None:

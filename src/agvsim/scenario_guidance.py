@@ -14,9 +14,13 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
-from agvsim.config_base import StrictConfig
+from agvsim.config_base import StrictConfig, construct
+from agvsim.control.api import ControllerContext
+from agvsim.control.line_follow import LineFollower
+from agvsim.control.route_follow import RouteFollower
+from agvsim.scenario_controllers import ControllerConfigBase
 from agvsim.sensors.floor_codes import FloorCameraSpec, FloorCodeGrid
 from agvsim.sensors.line_sensor import LineSensorSpec
 from agvsim.sensors.reflectors import ReflectorMap
@@ -26,6 +30,7 @@ from agvsim.world.tape import Arc, Spot, Tape
 Point = tuple[float, float]
 Polygon = Annotated[list[Point], Field(min_length=3, max_length=256)]
 Name = Annotated[str, Field(min_length=1, max_length=64)]
+JunctionChoice = Literal["left", "right", "straight"]
 
 
 # ---------------------------------------------------------------------------------- world
@@ -220,4 +225,81 @@ def floor_camera_spec(cfg: FloorCameraConfig, name: str) -> FloorCameraSpec:
         cfg.m_per_px,
         (cfg.mount_x_m, cfg.mount_y_m),
         cfg.rate_hz,
+    )
+
+
+# ---------------------------------------------------------------------------------- behaviours
+class LineFollowConfig(ControllerConfigBase):
+    """``controller: {type: line_follow, sensor: line, speed_m_s: 0.5, junctions: [left]}``"""
+
+    model_config = ConfigDict(str_max_length=200)
+
+    type: Literal["line_follow"]
+    sensor: Name = "line"
+    speed_m_s: float = Field(0.5, gt=0, le=100)
+    kp: float = Field(20.0, ge=0, le=10_000, description="rad/s per metre of offset")
+    ki: float = Field(0.0, ge=0, le=10_000)
+    kd: float = Field(1.0, ge=0, le=10_000)
+    slow_offset_m: float = Field(0.05, gt=0, le=10, description="offset at the slowest speed")
+    min_speed_frac: float = Field(0.3, gt=0, le=1)
+    junctions: Annotated[list[JunctionChoice], Field(max_length=10_000)] = []
+    spot_choices: dict[Annotated[int, Field(ge=0, le=2**31 - 1)], JunctionChoice] = Field(
+        default={}, description="spot code -> the choice at the next junction"
+    )
+
+
+class RouteConfig(ControllerConfigBase):
+    """``controller: {type: route, points: [[0, 0], [5, 0]], localization: floor_codes}``"""
+
+    model_config = ConfigDict(str_max_length=200)
+
+    type: Literal["route"]
+    points: Annotated[list[Point], Field(min_length=2, max_length=100_000)]
+    localization: Literal["odometry", "floor_codes", "reflectors"] = "odometry"
+    lookahead_m: float = Field(0.6, gt=0, le=100)
+    speed_m_s: float = Field(0.5, gt=0, le=100)
+    tolerance_m: float = Field(0.15, gt=0, le=100)
+    max_turn_rate_rad_s: float = Field(1.5, gt=0, le=100)
+    camera: Name = Field("floor_camera", description="the floor camera (floor_codes)")
+    sensor: Name = Field("lidar", description="the lidar that sees the reflectors")
+    range_std_m: float = Field(0.02, gt=0, le=10, description="reflector filter")
+    bearing_std_deg: float = Field(0.3, gt=0, le=90, description="reflector filter")
+    gate_m: float = Field(0.5, gt=0, le=100, description="reflector association gate")
+    odom_noise_per_m: float = Field(0.02, gt=0, le=10, description="reflector filter")
+
+
+def build_line_follow(cfg: LineFollowConfig, ctx: ControllerContext) -> LineFollower:
+    names = [s.name for s in getattr(ctx.spec, "line_sensors", ())]
+    if cfg.sensor not in names:
+        raise ValueError(f"sensor: the robot has no line sensor {cfg.sensor!r} (it has {names})")
+    return construct(LineFollower, cfg, junctions=tuple(cfg.junctions))
+
+
+def build_route(cfg: RouteConfig, ctx: ControllerContext) -> RouteFollower:
+    world = ctx.world
+    if cfg.localization == "floor_codes":
+        names = [c.name for c in getattr(ctx.spec, "floor_cameras", ())]
+        if cfg.camera not in names:
+            raise ValueError(
+                f"camera: localization floor_codes needs a floor_camera sensor {cfg.camera!r} "
+                f"(the robot has {names})"
+            )
+        if getattr(world, "floor_codes", None) is None:
+            raise ValueError("localization: floor_codes needs a world.floor_codes block")
+    reflectors = getattr(world, "reflectors", None)
+    if cfg.localization == "reflectors":
+        names = [s.name for s in getattr(ctx.spec, "sensors", ())]
+        if cfg.sensor not in names:
+            raise ValueError(
+                f"sensor: localization reflectors needs a range sensor {cfg.sensor!r} "
+                f"(the robot has {names})"
+            )
+        if reflectors is None:
+            raise ValueError("localization: reflectors needs a world.reflectors block")
+    return construct(
+        RouteFollower,
+        cfg,
+        reflectors=reflectors,
+        bearing_std_rad=math.radians(cfg.bearing_std_deg),
+        odom_noise=(cfg.odom_noise_per_m, cfg.odom_noise_per_m),
     )

@@ -218,8 +218,10 @@ def check_scenario(sc: Scenario, limits: Limits) -> list[str]:
     step_hz = 1.0 / sc.dt_s  # a sensor takes at most one reading a step
     for r in sc.robots:
         for s in r.sensors:
+            if s.type == "line":  # a line sensor reads every step: no rays, no pixels
+                continue
             rate = s.rate_hz or (10.0 if s.type == "lidar" else step_hz)
-            if s.type == "camera":
+            if s.type in ("camera", "floor_camera"):
                 pixels += s.width_px * s.height_px * min(rate, step_hz)  # type: ignore[union-attr]
             else:
                 beams = 4 if s.type == "rangers" else s.beams  # type: ignore[union-attr]

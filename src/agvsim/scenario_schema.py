@@ -51,6 +51,13 @@ from agvsim.scenario_controllers import (
     ScriptStepConfig as ScriptStepConfig,
 )
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
+from agvsim.scenario_guidance import (
+    FloorCameraConfig,
+    FloorCodesConfig,
+    LineSensorConfig,
+    ReflectorsConfig,
+    TapeConfig,
+)
 from agvsim.scenario_params import PARAMS
 
 # Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
@@ -171,6 +178,10 @@ class WorldConfig(StrictConfig):
     colors: ColorsConfig = ColorsConfig()
     markers: list[MarkerConfig] = []
     floor: FloorConfig | None = Field(default=None, description="friction for robots with dynamics")
+    # guidance infrastructure (docs/guidance.md)
+    tape: TapeConfig | None = None
+    floor_codes: FloorCodesConfig | None = None
+    reflectors: ReflectorsConfig | None = None
 
     @model_validator(mode="after")
     def _one_source(self) -> WorldConfig:
@@ -250,7 +261,10 @@ class CameraConfig(StrictConfig):
     )
 
 
-SensorConfig = Annotated[RangersConfig | LidarConfig | CameraConfig, Field(discriminator="type")]
+SensorConfig = Annotated[
+    RangersConfig | LidarConfig | CameraConfig | LineSensorConfig | FloorCameraConfig,
+    Field(discriminator="type"),
+]
 
 
 class OdometryConfig(StrictConfig):

@@ -17,6 +17,7 @@ import numpy as np
 import viser
 
 from agvsim.app import fleet_view, shapes
+from agvsim.app.guidance_view import draw_guidance
 from agvsim.app.session import Session
 from agvsim.sim.spec import BODY_HEIGHT_M, WALL_HEIGHT_M
 from agvsim.world.grid import OccupancyGrid
@@ -71,6 +72,7 @@ class SceneView:
         self._markers: list[Any] = []
         self._layout_nodes: list[Any] = []  # the scenario's layout: nodes, edges, stations
         self._boxes: list[Any] = []  # the world's static boxes (racks, pallets)
+        self._guidance: list[Any] = []  # tape, spots, floor codes, reflectors
         self._frame = 0
         self.frames_sent = 0
         server.scene.set_up_direction("+z")
@@ -108,6 +110,7 @@ class SceneView:
             sc.add_frame("/walls", show_axes=False)  # replaces an old mesh
         self._draw_markers(markers)
         self._draw_boxes()
+        self._guidance = draw_guidance(sc, self.session.sim.world, self._guidance)
         self._draw_overlay()
         self._layout_nodes = fleet_view.draw_session_layout(sc, self.session, self._layout_nodes)
 
@@ -345,7 +348,8 @@ def _sensor_kinds(config: dict, table) -> np.ndarray:
     kinds = []
     for r in config["robots"]:
         for s in r.get("sensors", []):
-            kinds.append(s.get("type") == "lidar")
+            if s.get("type") in ("lidar", "rangers"):  # the range sensors' slots only
+                kinds.append(s.get("type") == "lidar")
     out = np.array(kinds, dtype=bool)
     if len(out) != table.count:  # config and sim out of step for a moment: colour by beams
         out = np.array([sp.num_beams > 8 for sp in table.specs], dtype=bool)

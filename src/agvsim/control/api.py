@@ -22,6 +22,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from agvsim.scan import LaserScan
+from agvsim.sensors.floor_codes import FloorFixReading
+from agvsim.sensors.line_sensor import LineReading
 
 
 class ControlMode(StrEnum):
@@ -49,6 +51,10 @@ class Observation:
     model: object = None  # this robot's kinematic model (for command_for / inverse kinematics)
     mode: ControlMode = ControlMode.INVERSE  # INVERSE: commands are twists; FORWARD: wheels
     dt_s: float = 0.02  # the kinematics step
+    # guidance sensors (docs/guidance.md), by sensor name: each line sensor's reading and each
+    # floor camera's latest fix (seq 0: none yet)
+    lines: dict[str, LineReading] = field(default_factory=dict)
+    floor_fixes: dict[str, FloorFixReading] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -144,3 +150,4 @@ class ControllerContext:
     robot_names: tuple[str, ...] = ()
     base_dir: object = None  # the scenario file's folder (pathlib.Path)
     static: object = None  # the known map's StaticMap (walls + boxes), to tell robots apart
+    world: object = None  # the sim.spec.World: tape, floor codes, reflectors (guidance)

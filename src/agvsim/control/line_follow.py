@@ -19,8 +19,10 @@ differential robot drives as it is and a car-like robot through its inverse kine
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+
+from agvsim.control.api import Observation, command_for
 
 JUNCTION_CHOICES = ("left", "right", "straight")
 
@@ -39,6 +41,7 @@ class LineFollowLaw:
     _integral: float = 0.0
     _next_junction: int = 0
     _in_junction: bool = False
+    _forced: str | None = None  # a choice a spot asked for, used at the next junction
     taken: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -49,9 +52,19 @@ class LineFollowLaw:
     def reset(self) -> None:
         self.state, self._prev_e, self._integral = "follow", None, 0.0
         self._next_junction, self._in_junction = 0, False
+        self._forced = None
         self.taken.clear()
 
+    def force(self, choice: str) -> None:
+        """Take ``choice`` at the next junction (or the one under the bar now) instead of the
+        next entry of ``junctions`` (a spot's code asked for it); the list is not advanced."""
+        if choice not in JUNCTION_CHOICES:
+            raise ValueError(f"{choice!r} is not one of {', '.join(JUNCTION_CHOICES)}")
+        self._forced = choice
+
     def choice(self) -> str:
+        if self._forced is not None:
+            return self._forced
         if not self.junctions:
             return "straight"
         return self.junctions[self._next_junction % len(self.junctions)]
@@ -65,7 +78,9 @@ class LineFollowLaw:
         if len(runs) == 1:
             if self._in_junction:  # passed it: the next junction gets the next choice
                 self._in_junction = False
-                self._next_junction += 1
+                if self._forced is None:
+                    self._next_junction += 1
+                self._forced = None
             e = runs[0]
             self.state = "follow"
         else:
@@ -90,3 +105,62 @@ class LineFollowLaw:
             self.min_speed_frac, 1.0 - (1.0 - self.min_speed_frac) * abs(e) / self.slow_offset_m
         )
         return self.speed_m_s * frac, omega
+
+
+class LineFollower:
+    """A controller around :class:`LineFollowLaw`: reads the line sensor ``sensor`` of the
+    observation and commands the law's twist in the robot's mode (``command_for``: car-like
+    models steer through their inverse kinematics). ``spot_choices`` maps a spot's code to the
+    choice to take at the next junction (a magnet or tag before a fork tells the way).
+
+    ``state_name``: "follow", "junction" or "lost" (no line under the bar: it stands)."""
+
+    def __init__(
+        self,
+        sensor: str = "line",
+        speed_m_s: float = 0.5,
+        kp: float = 20.0,
+        ki: float = 0.0,
+        kd: float = 1.0,
+        slow_offset_m: float = 0.05,
+        min_speed_frac: float = 0.3,
+        junctions: Sequence[str] = (),
+        spot_choices: Mapping[int, str] | None = None,
+    ):
+        self.sensor = sensor
+        self.law = LineFollowLaw(
+            speed_m_s, kp, ki, kd, slow_offset_m, min_speed_frac, tuple(junctions)
+        )
+        self.spot_choices = dict(spot_choices or {})
+        for code, choice in self.spot_choices.items():
+            if choice not in JUNCTION_CHOICES:
+                raise ValueError(
+                    f"spot_choices[{code}]: {choice!r} is not one of {', '.join(JUNCTION_CHOICES)}"
+                )
+        self.reset()
+
+    def reset(self) -> None:
+        self.law.reset()
+        self.state_name = "follow"
+        self._last_spot = -1
+        self.spots_seen: list[int] = []
+
+    def step(self, obs: Observation) -> object:
+        reading = obs.lines.get(self.sensor)
+        if reading is None:
+            raise ValueError(
+                f"line_follow: robot {obs.name!r} has no line sensor {self.sensor!r} "
+                f"(it has: {', '.join(obs.lines) or 'none'})"
+            )
+        spot = reading.spot_code
+        if spot >= 0 and spot != self._last_spot:
+            self.spots_seen.append(spot)
+            if spot in self.spot_choices:
+                self.law.force(self.spot_choices[spot])
+        self._last_spot = spot
+        v, omega = self.law.step(reading.offsets_m, obs.dt_s)
+        self.state_name = self.law.state
+        return command_for(obs, v, 0.0, omega)
+
+    def report(self) -> dict:
+        return {"junctions_taken": list(self.law.taken), "spots_seen": list(self.spots_seen)}

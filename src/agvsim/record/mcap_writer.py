@@ -33,6 +33,10 @@ topic                           type                         when
                                                              slip speed of each wheel (m/s)
 ==============================  ===========================  ==================================
 
+LaserScan carries ``intensities`` when the world has reflectors (empty otherwise); the
+guidance topics (line sensors, floor-code fixes, pose estimates) are listed in
+``agvsim.record.guidance_topics``.
+
 Message times (log, publish and header stamps) are the simulated time, from 0. The file is
 streamed: a chunk is written at least every ``flush_sim_s`` simulated seconds and every
 ``flush_wall_s`` wall seconds, and the file is valid after each (see ``mcap_file``).
@@ -46,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from agvsim.record import ros2msg as msg
+from agvsim.record.guidance_topics import GuidanceTopics
 from agvsim.record.mcap_file import McapStreamWriter
 from agvsim.record.ros2msg import topic_name
 
@@ -178,6 +183,8 @@ class Recorder:
         self._prev_odom: tuple[float, np.ndarray] | None = None
         self._last_flush_s = sim.state.t_s
         self._last_flush_wall = time.perf_counter()
+        # guidance sensors and pose estimates (docs/guidance.md): only where a run has them
+        self._guidance = GuidanceTopics(self, sim) if GuidanceTopics.needed(sim) else None
         meta = {"format": "agvsim recording 1", "dt_s": repr(sim.dt_s), "seed": str(sim.seed)}
         meta["robots"] = ",".join(r.name for r in sim.robots)
         if scenario_yaml is not None:
@@ -285,6 +292,8 @@ class Recorder:
             self._write_poses(t_s, t_ns)
             self._write_joints(t_s, t_ns)
             self._write_slip(t_ns)
+            if self._guidance is not None:
+                self._guidance.write(t_ns)
             self._next_pose_s = t_s + self.pose_period_s
         self._write_scans(t_ns)
         if self._camera_seq:
@@ -340,10 +349,13 @@ class Recorder:
         if tab.count == 0:
             return
         fresh = np.flatnonzero(st.scan_stamp > self._last_scan)
+        inten = st.intensities if st.intensities.size else None  # a world with reflectors
         for s in fresh.tolist():
             cid, enc = self._scan_channels[s]
             stamp = _ns(float(st.scan_stamp[s]))
-            self.writer.add_message(cid, stamp, enc.encode(stamp, st.scans[s, : enc.num_beams]))
+            b = enc.num_beams
+            data = enc.encode(stamp, st.scans[s, :b], None if inten is None else inten[s, :b])
+            self.writer.add_message(cid, stamp, data)
         self._last_scan[fresh] = st.scan_stamp[fresh]
 
     def _camera_spec(self, frame):

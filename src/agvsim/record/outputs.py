@@ -26,6 +26,11 @@ COLUMNS = (
 DYNAMICS_COLUMNS = [
     f"wheel{k + 1}_{q}" for q in ("torque_nm", "slip_m_s", "power_w") for k in range(W_MAX)
 ]
+# appended only when a controller estimates its pose (the route follower, docs/guidance.md):
+# the estimate the controller acted on in the row's step and its distance from the ground
+# truth of that observation (the step's start: one step before the row's x, y), empty for
+# the other robots
+ESTIMATE_COLUMNS = ["est_x", "est_y", "est_theta", "est_error_m"]
 
 
 class TrajectoryWriter:
@@ -38,7 +43,15 @@ class TrajectoryWriter:
         self.path, self.sim, self.every = Path(path), sim, every
         self._f = self.path.open("w", encoding="utf-8", newline="")
         self._dyn = sim.dynamics is not None
-        self._f.write(",".join(COLUMNS + (DYNAMICS_COLUMNS if self._dyn else [])) + "\n")
+        #: robot index -> its controller, for the robots whose controller has an ``estimate``
+        self._est = {
+            int(i): b.controller
+            for b in sim.bindings
+            if not b.batch and hasattr(b.controller, "estimate")
+            for i in b.robots
+        }
+        head = COLUMNS + (DYNAMICS_COLUMNS if self._dyn else [])
+        self._f.write(",".join(head + (ESTIMATE_COLUMNS if self._est else [])) + "\n")
         self._names = [r.name for r in sim.robots]
         self._nw = [len(r.model.wheel_names) for r in sim.robots]
         self._has_dyn = [r.dynamics is not None for r in sim.robots]
@@ -62,6 +75,8 @@ class TrajectoryWriter:
             )
             if self._dyn:
                 line += "," + self._dynamics_cells(i)
+            if self._est:
+                line += "," + self._estimate_cells(i)
             lines.append(line + "\n")
         self._f.write("".join(lines))
         self.rows += len(lines)
@@ -76,6 +91,14 @@ class TrajectoryWriter:
         for arr in (st.wheel_torque_nm, st.wheel_slip_m_s, st.wheel_power_w):
             cells += [f"{arr[i, k]:.6g}" if k < n else "" for k in range(W_MAX)]
         return ",".join(cells)
+
+    def _estimate_cells(self, i: int) -> str:
+        ctrl = self._est.get(i)
+        est = getattr(ctrl, "estimate", None)
+        if est is None:
+            return ",,,"
+        err = float(getattr(ctrl, "pose_error_m", math.nan))
+        return f"{est[0]:.6f},{est[1]:.6f},{est[2]:.6f},{err:.6f}"
 
     def close(self) -> None:
         if not self._f.closed:

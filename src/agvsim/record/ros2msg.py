@@ -480,12 +480,19 @@ class LaserScanEncoder:
         self._head = full[4 + 8 : len(full) - 4 - 4 * self.num_beams]
         self._tail = b"\x00\x00\x00\x00"  # no intensities
 
-    def encode(self, t_ns: int, ranges: np.ndarray) -> bytes:
+    def encode(self, t_ns: int, ranges: np.ndarray, intensities: np.ndarray | None = None) -> bytes:
+        """The scan; ``intensities`` (B,) go into the message's intensities (None: empty)."""
         r = np.asarray(ranges, dtype="<f4")
         if r.shape != (self.num_beams,):
             raise ValueError(f"expected {self.num_beams} ranges, got shape {r.shape}")
+        tail = self._tail
+        if intensities is not None:
+            i = np.asarray(intensities, dtype="<f4")
+            if i.shape != r.shape:
+                raise ValueError(f"expected {self.num_beams} intensities, got shape {i.shape}")
+            tail = struct.pack("<I", len(i)) + i.tobytes()
         return b"".join(
-            (_ENCAPSULATION, _STAMP.pack(*_sec_nsec(t_ns)), self._head, r.tobytes(), self._tail)
+            (_ENCAPSULATION, _STAMP.pack(*_sec_nsec(t_ns)), self._head, r.tobytes(), tail)
         )
 
 

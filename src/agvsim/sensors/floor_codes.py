@@ -145,6 +145,17 @@ class CodeFix:
     corners_px: np.ndarray  # (4, 2)
 
 
+@dataclass(frozen=True)
+class FloorFixReading:
+    """A floor camera's latest fix: ``seq`` fixes so far (0: none yet), the last at
+    ``stamp_s`` from code ``code_id`` giving the robot's ``pose`` (x, y, theta, world)."""
+
+    stamp_s: float
+    seq: int
+    code_id: int
+    pose: np.ndarray
+
+
 def read_fix(spec: FloorCameraSpec, grid: FloorCodeGrid, image: np.ndarray) -> CodeFix | None:
     """Decode the image (OpenCV ArUco detector); from the first whole code with an id on the
     grid, the robot's pose. None when no code is read."""

@@ -44,6 +44,18 @@ class LineSensorSpec:
         return np.linspace(-self.span_m / 2.0, self.span_m / 2.0, self.elements)
 
 
+@dataclass(frozen=True)
+class LineReading:
+    """What a line sensor reads at ``stamp_s``: its elements' states ``(E,)``, the lateral
+    offset (m, left positive, noise included) of each run of lit elements, right to left
+    (empty: no line under the bar), and the code of the spot under the reader (-1: none)."""
+
+    stamp_s: float
+    active: np.ndarray
+    offsets_m: tuple[float, ...]
+    spot_code: int = -1
+
+
 @nb.njit(cache=True)
 def _seg_distance(px: float, py: float, s: np.ndarray) -> float:
     ax, ay, bx, by = s[0], s[1], s[2], s[3]

@@ -41,6 +41,7 @@ from agvsim.sensors.range_sensor import apply_noise
 from agvsim.sensors.raycast import RayCaster
 from agvsim.sim import observe
 from agvsim.sim.collide import Collider, box_pairs_overlapping
+from agvsim.sim.guidance import GuidanceRig
 from agvsim.sim.kernels import move_bodies, pair_faults
 from agvsim.sim.spec import RobotSpec, World
 from agvsim.sim.state import ROBOT_ROWS, SensorTable, SimState  # noqa: F401 - in hints
@@ -141,6 +142,11 @@ class Simulation:
         has_cam = any(r.cameras for r in self.robots)
         self.cameras: CameraRig | None = CameraRig(self.robots, world) if has_cam else None
         self._groups = self._build_groups()
+        # guidance sensors only where robots have them or the world has reflectors
+        has_guide = world.reflectors is not None or any(
+            r.line_sensors or r.floor_cameras for r in self.robots
+        )
+        self.guidance: GuidanceRig | None = GuidanceRig(self.robots, world) if has_guide else None
         has_dyn = any(r.dynamics is not None for r in self.robots)
         self.dynamics = Dynamics(self.robots, world.floor, W_MAX, S_MAX) if has_dyn else None
         self._dyn_sel: slice | np.ndarray = np.zeros(0, dtype=np.int64)
@@ -237,6 +243,17 @@ class Simulation:
             st.images, st.depths = self.cameras.blank_frames()
             st.image_stamp, st.image_seq = np.zeros(c), np.zeros(c, dtype=np.int64)
             st.image_pose, st.next_image_s = np.zeros((c, 3)), np.zeros(c)
+        if self.guidance is not None:
+            g = self.guidance
+            st.line_active = np.zeros((g.line_count, g.line_pos.shape[1]), dtype=bool)
+            st.line_offsets = np.full((g.line_count, g.line_offsets_width), np.nan)
+            st.line_spot = np.full(g.line_count, -1, dtype=np.int64)
+            st.line_stamp = np.zeros(g.line_count)
+            st.fix_pose, st.fix_code = np.zeros((g.cam_count, 3)), np.full(g.cam_count, -1)
+            st.fix_stamp, st.fix_seq = np.zeros(g.cam_count), np.zeros(g.cam_count, np.int64)
+            st.next_fix_s = np.zeros(g.cam_count)
+            if self.world.reflectors is not None:
+                st.intensities = np.zeros_like(st.scans)
         for b in self.bindings:
             try:
                 if b.batch:
@@ -250,6 +267,7 @@ class Simulation:
                 raise ControllerError(who, 0.0, exc) from exc
         self._sense(force=True)
         self._render(force=True)
+        self._guide(force=True)
 
     # ------------------------------------------------------------------ changing the state
     def place(self, i: int, pose: Sequence[float] | np.ndarray, at_rest: bool = False) -> None:
@@ -346,6 +364,7 @@ class Simulation:
         self.state.step += 1
         self._sense()
         self._render()
+        self._guide()
 
     def run(self, duration_s: float) -> None:
         for _ in range(int(round(duration_s / self.dt_s))):
@@ -672,6 +691,12 @@ class Simulation:
                 tab.dropout[s],
                 self.rng,
             )
+        if self.guidance is not None and self.world.reflectors is not None:
+            inten = self.guidance.scan_intensities(
+                st.poses, owner, tab.mount[s], rel, tab.num_beams[s], exact
+            )
+            inten[~np.isfinite(exact)] = 0.0  # a dropped beam returns nothing
+            st.intensities[s, :width] = inten
         if not direct:
             st.scans[s, :width] = exact
         st.scan_stamp[s] = st.t_s
@@ -690,6 +715,29 @@ class Simulation:
             st.image_seq[slot] += 1
             st.image_pose[slot] = pose
             st.next_image_s[slot] = st.t_s + self.cameras.period_s[slot]
+
+    def _guide(self, force: bool = False) -> None:
+        """Line sensors every step; floor cameras that are due (render, decode, fix)."""
+        g = self.guidance
+        if g is None:
+            return
+        st = self.state
+        if g.line_count:
+            read = g.read_lines(st.poses, st.rng)
+            st.line_active, st.line_offsets, st.line_spot = (
+                read.active,
+                read.offsets_m,
+                read.spot_code,
+            )
+            st.line_stamp[:] = st.t_s
+        if g.cam_count:
+            due = np.ones(g.cam_count, bool) if force else st.t_s >= st.next_fix_s - 1e-9
+            for slot, code, pose in g.read_codes(st.poses, due):
+                st.next_fix_s[slot] = st.t_s + g.cam_period_s[slot]
+                if pose is not None:
+                    st.fix_pose[slot], st.fix_code[slot] = pose, code
+                    st.fix_stamp[slot] = st.t_s
+                    st.fix_seq[slot] += 1
 
     def camera_frames(self) -> list[CameraFrame]:
         """The latest frame of every camera of every robot (empty without cameras)."""

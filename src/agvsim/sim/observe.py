@@ -14,6 +14,8 @@ import numpy as np
 
 from agvsim.control.api import BatchObservation, ControlMode, Observation
 from agvsim.scan import LaserScan
+from agvsim.sensors.floor_codes import FloorFixReading
+from agvsim.sensors.line_sensor import LineReading
 from agvsim.sim.state import SensorTable
 
 if TYPE_CHECKING:
@@ -31,6 +33,7 @@ def scan(sim: Simulation, slot: int) -> LaserScan:
         spec.range_max_m,
         st.scans[slot, : spec.num_beams].copy(),
         np.array((*spec.mount_xy_m, spec.mount_yaw_rad), dtype=np.float64),
+        intensities=st.intensities[slot, : spec.num_beams].copy() if st.intensities.size else None,
     )
 
 
@@ -60,6 +63,25 @@ def observation(sim: Simulation, i: int) -> Observation:
             name = cams.specs[c].name
             images[name], depth[name] = st.images[c], st.depths[c]
             stamps[name] = float(st.image_stamp[c])
+    lines: dict[str, LineReading] = {}
+    fixes: dict[str, FloorFixReading] = {}
+    g = sim.guidance
+    if g is not None:
+        for k in g.line_slots_of[i]:
+            offs = st.line_offsets[k]
+            lines[g.line_specs[k].name] = LineReading(
+                float(st.line_stamp[k]),
+                st.line_active[k, : g.line_specs[k].elements].copy(),
+                tuple(float(v) for v in offs[np.isfinite(offs)]),
+                int(st.line_spot[k]),
+            )
+        for c in g.cam_slots_of[i]:
+            fixes[g.cam_specs[c].name] = FloorFixReading(
+                float(st.fix_stamp[c]),
+                int(st.fix_seq[c]),
+                int(st.fix_code[c]),
+                st.fix_pose[c].copy(),
+            )
     return CameraObservation(
         t_s=st.t_s,
         name=robot.name,
@@ -75,6 +97,8 @@ def observation(sim: Simulation, i: int) -> Observation:
         images=images,
         depth=depth,
         image_stamps=stamps,
+        lines=lines,
+        floor_fixes=fixes,
     )
 
 
@@ -88,7 +112,35 @@ def batch_observation(sim: Simulation, idx: np.ndarray) -> BatchObservation:
         odom_pose=st.odom_poses[idx],
         bump=st.bump[idx],
         true_pose=st.poses[idx],
+        extra=_guidance_extra(sim, idx),
     )
+
+
+def _guidance_extra(sim: Simulation, idx: np.ndarray) -> dict:
+    """Batch form of the guidance readings (empty without them): ``line_offsets`` /
+    ``line_spot`` of each robot's first line sensor ``(k, R)`` / ``(k,)`` (NaN / -1 for a robot
+    without one), ``intensities`` of the range sensors by name ``(k, B)``."""
+    g = sim.guidance
+    if g is None:
+        return {}
+    st = sim.state
+    out: dict = {}
+    if g.line_count:
+        first = np.array(
+            [g.line_slots_of[int(i)][0] if g.line_slots_of[int(i)] else -1 for i in idx]
+        )
+        has = first >= 0
+        offs = np.full((len(idx), st.line_offsets.shape[1]), np.nan)
+        offs[has] = st.line_offsets[first[has]]
+        spot = np.full(len(idx), -1, dtype=np.int64)
+        spot[has] = st.line_spot[first[has]]
+        out["line_offsets"], out["line_spot"] = offs, spot
+    if st.intensities.size:
+        out["intensities"] = {
+            name: st.intensities[rows, :width]
+            for name, (rows, width) in sim.batch_slots(idx).items()
+        }
+    return out
 
 
 def batch_slots(tab: SensorTable, idx: np.ndarray) -> dict[str, tuple[slice | np.ndarray, int]]:

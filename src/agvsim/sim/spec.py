@@ -10,9 +10,13 @@ from agvsim.control.api import ControlMode
 from agvsim.dynamics.spec import DynamicsSpec, FloorFriction
 from agvsim.kinematics.base import KinematicModel
 from agvsim.sensors.camera import CameraSpec
+from agvsim.sensors.floor_codes import FloorCameraSpec, FloorCodeGrid
+from agvsim.sensors.line_sensor import LineSensorSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
+from agvsim.sensors.reflectors import ReflectorMap
 from agvsim.world.grid import OccupancyGrid
 from agvsim.world.markers import Appearance
+from agvsim.world.tape import Tape
 
 # Heights of the 3D world (m), shared by the onboard camera and the browser app: walls are the
 # occupancy grid extruded to WALL_HEIGHT_M, static boxes stand BOX_HEIGHT_M tall, and a robot's
@@ -46,6 +50,9 @@ class RobotSpec:
     odometry: OdometrySpec = field(default_factory=OdometrySpec)
     color: str = "#d62728"
     dynamics: DynamicsSpec | None = None  # None: kinematic (commanded speeds reached at once)
+    # guidance sensors (docs/guidance.md): line sensor bars and downward floor-code cameras
+    line_sensors: tuple[LineSensorSpec, ...] = ()
+    floor_cameras: tuple[FloorCameraSpec, ...] = ()
 
     @property
     def footprint_half_m(self) -> tuple[float, float]:
@@ -70,6 +77,10 @@ class World:
     boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # (K, 5) static boxes
     appearance: Appearance = field(default_factory=Appearance)  # colours, markers (camera)
     floor: FloorFriction = field(default_factory=FloorFriction)  # read by robots with dynamics
+    # guidance infrastructure (docs/guidance.md); None: not laid
+    tape: Tape | None = None
+    floor_codes: FloorCodeGrid | None = None
+    reflectors: ReflectorMap | None = None
 
     def __post_init__(self) -> None:
         b = np.asarray(self.boxes, dtype=np.float64).reshape(-1, 5)

@@ -169,6 +169,18 @@ class SimState:
     wheel_torque_nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (N, W)
     wheel_slip_m_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (N, W)
     wheel_power_w: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (N, W)
+    # guidance sensors (agvsim.sim.guidance; empty without them): L line sensor slots,
+    # F floor-camera slots, and the range sensors' intensities when the world has reflectors
+    line_active: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))  # (L, E)
+    line_offsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (L, R) m
+    line_spot: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (L,) code
+    line_stamp: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (L,) s
+    fix_pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (F, 3) last fix
+    fix_code: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (F,) its code
+    fix_stamp: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (F,) its time
+    fix_seq: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (F,) fixes
+    next_fix_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (F,) next frame
+    intensities: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (S, B_max)
 
     @classmethod
     def zeros(
