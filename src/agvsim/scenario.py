@@ -20,11 +20,12 @@ from pydantic import ValidationError
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.control.api import ControllerContext
 from agvsim.control.traffic import KeepClear, RobotSight, StaticMap, sight_sensor
-from agvsim.dynamics.vehicle import check_dynamics
+from agvsim.dynamics.vehicle import Dynamics, check_dynamics
 from agvsim.kinematics import wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
 from agvsim.scenario_controllers import cone_beams as cone_beams  # re-exported
 from agvsim.scenario_dynamics import dynamics_spec, floor_spec
+from agvsim.scenario_guidance import safety_problems, safety_spec, top_speed_m_s
 from agvsim.scenario_limits import (
     MAX_MAGNITUDE,
     Limits,
@@ -47,7 +48,7 @@ from agvsim.scenario_schema import _models_in as _models_in  # re-exported
 from agvsim.scenario_schema import parse_robot as parse_robot  # re-exported
 from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
-from agvsim.sim.engine import Binding, Simulation
+from agvsim.sim.engine import S_MAX, W_MAX, Binding, Simulation
 from agvsim.sim.spec import (
     BODY_HEIGHT_M,
     WALL_HEIGHT_M,
@@ -382,6 +383,7 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
         ),
         color=rc.color,
         dynamics=dynamics_spec(rc.dynamics, offset),
+        safety=None if rc.safety is None else safety_spec(rc.safety, f"{where}.safety"),
     )
     if spec.dynamics is not None:
         try:
@@ -481,6 +483,7 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     except ValueError as err:
         raise ScenarioError("", [f"world.{err}"]) from None
     world = World(grid, boxes, look, floor=floor_spec(sc.world.floor))
+    _check_safety(sc, specs, world)
     bindings = _bindings(sc, specs, base, grid, boxes)
     sim = Simulation(
         world,
@@ -493,6 +496,33 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     )
     _check_placement(sim)
     return sim
+
+
+def _check_safety(sc: Scenario, specs: list[RobotSpec], world: World) -> None:
+    """Every robot's safety scanner reads one of its range sensors and has fields long enough
+    to stop in from its top speed (with dynamics: at what its wheels can brake on the floor)."""
+    problems: list[str] = []
+    for i, (rc, spec) in enumerate(zip(sc.robots, specs, strict=True)):
+        if rc.safety is None or spec.safety is None:
+            continue
+        hl = spec.body_length_m / 2.0
+        limit = None
+        if spec.dynamics is not None:
+            dyn = Dynamics([spec], world.floor, W_MAX, S_MAX)
+            ahead, behind = (dyn.braking_deceleration_m_s2(0, None, a) for a in (0.0, np.pi))
+            limit = min(ahead, behind)
+        problems += safety_problems(
+            rc.safety,
+            spec.safety,
+            f"robots[{i}] ({rc.name}).safety",
+            [s.name for s in spec.sensors],
+            spec.body_offset_x_m + hl,
+            hl - spec.body_offset_x_m,
+            top_speed_m_s(spec.model),
+            limit,
+        )
+    if problems:
+        raise ScenarioError("", problems)
 
 
 def _check_placement(sim: Simulation) -> None:

@@ -51,6 +51,7 @@ from agvsim.scenario_controllers import (
     ScriptStepConfig as ScriptStepConfig,
 )
 from agvsim.scenario_dynamics import DynamicsConfig, FloorConfig
+from agvsim.scenario_guidance import SafetyConfig
 from agvsim.scenario_params import PARAMS
 
 # Bounded integers: numba kernels and OpenCV take 64-bit (or smaller) integers only
@@ -322,6 +323,9 @@ class _RobotBase(StrictConfig):
     slam: SlamBlock | None = None
     dynamics: DynamicsConfig | None = Field(
         default=None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
+    )
+    safety: SafetyConfig | None = Field(
+        default=None, description="a safety laser scanner's field sets (docs/safety_fields.md)"
     )
 
     @field_validator("color")

@@ -11,6 +11,7 @@ from agvsim.dynamics.spec import DynamicsSpec, FloorFriction
 from agvsim.kinematics.base import KinematicModel
 from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
+from agvsim.sensors.safety_fields import SafetyScannerSpec
 from agvsim.world.grid import OccupancyGrid
 from agvsim.world.markers import Appearance
 
@@ -46,6 +47,7 @@ class RobotSpec:
     odometry: OdometrySpec = field(default_factory=OdometrySpec)
     color: str = "#d62728"
     dynamics: DynamicsSpec | None = None  # None: kinematic (commanded speeds reached at once)
+    safety: SafetyScannerSpec | None = None  # a safety scanner's field sets (sim/safety.py)
 
     @property
     def footprint_half_m(self) -> tuple[float, float]:
