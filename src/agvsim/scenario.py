@@ -520,6 +520,7 @@ def _check_safety(sc: Scenario, specs: list[RobotSpec], world: World) -> None:
             hl - spec.body_offset_x_m,
             top_speed_m_s(spec.model),
             limit,
+            next((1.0 / s.rate_hz for s in spec.sensors if s.name == spec.safety.sensor), 0.0),
         )
     if problems:
         raise ScenarioError("", problems)

@@ -209,12 +209,15 @@ def safety_problems(
     rear_m: float,
     top_speed: float,
     decel_limit_m_s2: float | None = None,
+    scan_period_s: float = 0.0,
 ) -> list[str]:
     """What is wrong with a robot's scanner, one message each naming ``where`` (the robot's
     ``safety`` block) and its field sets: a ``sensor`` that is not one of the robot's range
     sensors (``sensor_names``), and (unless ``check_lengths: false``) protective fields too
     short to stop in at ``top_speed`` m/s forwards and backwards. ``decel_limit_m_s2``: the
-    most the robot's dynamics can brake; below ``decel_m_s2`` it is what the check uses."""
+    most the robot's dynamics can brake; below ``decel_m_s2`` it is what the check uses.
+    ``scan_period_s``: the sensor's period, which adds to the response time (a return can
+    enter the field just after a scan and is seen one period later)."""
     out: list[str] = []
     if spec.sensor not in sensor_names:
         out.append(
@@ -223,10 +226,16 @@ def safety_problems(
         )
     if not cfg.check_lengths:
         return out
-    used, note = spec, ""
+    used = replace(spec, response_time_s=spec.response_time_s + scan_period_s)
+    note = (
+        f" (the response counts response_time_s {spec.response_time_s:g} s and the "
+        f"sensor's scan period {scan_period_s:g} s)"
+        if scan_period_s > 0
+        else ""
+    )
     if decel_limit_m_s2 is not None and decel_limit_m_s2 < spec.decel_m_s2:
-        used = replace(spec, decel_m_s2=max(decel_limit_m_s2, 1e-9))
-        note = (
+        used = replace(used, decel_m_s2=max(decel_limit_m_s2, 1e-9))
+        note += (
             f" (decel_m_s2 {spec.decel_m_s2:g} is not reachable: the robot's dynamics brake at "
             f"most {decel_limit_m_s2:.3f} m/s^2 on this floor, dynamics.braking's limit, "
             "which this check uses)"

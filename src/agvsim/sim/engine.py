@@ -42,7 +42,7 @@ from agvsim.sensors.raycast import RayCaster
 from agvsim.sim import observe
 from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.kernels import move_bodies, pair_faults
-from agvsim.sim.safety import SafetyTable, count_events
+from agvsim.sim.safety import PROTECTIVE, SafetyTable, count_events
 from agvsim.sim.spec import RobotSpec, World
 from agvsim.sim.state import ROBOT_ROWS, SensorTable, SimState  # noqa: F401 - in hints
 from agvsim.sim.watchdog import ControllerClock, TimeLimitExceeded, check_limit
@@ -499,18 +499,26 @@ class Simulation:
         st, tab = self.state, self.safety
         assert tab is not None
         idx = tab.robots
-        active = tab.active_sets(st.twists[idx, 0], st.steering[idx])
-        slots = tab.slots
-        status = tab.status(
-            st.scans[slots], self.sensors.rel_angles[slots], self.sensors.mount[slots], active
-        )
         is_tw = st.cmd_is_twist[idx]
         cmd = np.zeros((len(idx), 3))
         cmd[is_tw] = st.cmd_twist[idx[is_tw]]
         if not is_tw.all():
             cmd[~is_tw] = self._wheel_twists(idx[~is_tw])
+        prev = st.twists[idx]
+        # the field set of the faster of the speed driven and the speed commanded: a robot
+        # standing in a short field must not start at a speed the field is too short for
+        speed = np.where(np.abs(cmd[:, 0]) > np.abs(prev[:, 0]), cmd[:, 0], prev[:, 0])
+        active = tab.active_sets(speed, st.steering[idx])
+        slots = tab.slots
+        status = tab.status(
+            st.scans[slots], self.sensors.rel_angles[slots], self.sensors.mount[slots], active
+        )
+        # a protective stop holds until the robot stands, even if a slower field set no
+        # longer sees the obstacle on the way down
+        moving = (np.hypot(prev[:, 0], prev[:, 1]) > 1e-4) | (np.abs(prev[:, 2]) > 1e-4)
+        status[(st.safety_status[idx] == PROTECTIVE) & moving] = PROTECTIVE
         since = st.safety_since_s[idx]
-        out = tab.brake(cmd, st.twists[idx], status, since, st.t_s, self.dt_s)
+        out = tab.brake(cmd, prev, status, since, st.t_s, self.dt_s)
         st.cmd_twist[idx[is_tw]] = out[is_tw]
         if not is_tw.all():
             fw = idx[~is_tw]

@@ -32,6 +32,8 @@ from agvsim.sensors.safety_fields import (
 )
 from agvsim.sim.spec import RobotSpec
 
+#: the commanded deceleration of robots with dynamics: zero wheel speed in one step
+EMERGENCY_DECEL = 1e9
 #: events counted per robot: column 0 warning, column 1 protective
 EVENT_KINDS = (WARNING, PROTECTIVE)
 
@@ -100,7 +102,15 @@ class SafetyTable:
             n_sets=np.asarray([len(s.field_sets) for s in specs], dtype=np.int64),
             ranges=np.asarray(ranges, dtype=np.float64).reshape(-1, 4),
             response_s=np.asarray([s.response_time_s for s in specs], dtype=np.float64),
-            decel_m_s2=np.asarray([s.decel_m_s2 for s in specs], dtype=np.float64),
+            # with dynamics the wheels are told to stand after the response time: the brake
+            # gives what friction and motors allow (dynamics.braking's limit)
+            decel_m_s2=np.asarray(
+                [
+                    EMERGENCY_DECEL if robots[i].dynamics is not None else s.decel_m_s2
+                    for i, s in zip(idx, specs, strict=True)
+                ],
+                dtype=np.float64,
+            ),
             warn_speed_m_s=np.asarray([s.warning_speed_m_s for s in specs], dtype=np.float64),
         )
 
