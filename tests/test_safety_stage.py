@@ -283,3 +283,55 @@ def test_runs_without_a_safety_block_have_no_safety_stage():
     assert sim.safety is None
     sim.run(0.2)
     assert sim.state.safety_set.tolist() == [-1] and sim.state.safety_status.tolist() == [0]
+
+
+def test_run_outputs_carry_the_safety_status_events_and_field_markers(tmp_path):
+    import csv
+    import json
+
+    import mcap_ros2.decoder
+    from mcap.reader import make_reader
+
+    from agvsim.record.mcap_writer import Recorder
+    from agvsim.record.outputs import TrajectoryWriter, summary
+    from agvsim.sim.safety import STATUS_RGB
+
+    steps = [{"duration_s": 30.0, "twist": [0.8, 0.0]}]
+    sim = sim_of(scenario("differential", steps, box_at_m=3.5))
+    traj = TrajectoryWriter(tmp_path / "trajectory.csv", sim)
+    rec = Recorder(tmp_path / "run.mcap", sim)
+    statuses = []
+    for _ in range(int(8.0 / DT)):
+        sim.step()
+        traj.record()
+        rec.record()
+        statuses.append(int(sim.state.safety_status[0]))
+    traj.close()
+    rec.close()
+    rows = list(csv.DictReader((tmp_path / "trajectory.csv").open()))
+    assert [r["safety"] for r in rows] == [("clear", "warning", "protective")[s] for s in statuses]
+    data = json.loads(json.dumps(summary(sim, 1.0)))
+    got = data["safety"]["agv"]
+    k_warn, k_prot = statuses.index(WARNING), statuses.index(PROTECTIVE)
+    assert got["warning"]["count"] == 1 and got["protective"]["count"] == 1
+    # the status of step k is decided at its start, t = k dt
+    assert got["warning"]["first_t_s"] == pytest.approx(k_warn * DT)
+    assert got["protective"]["first_t_s"] == pytest.approx(k_prot * DT)
+    assert got["protective"]["last_t_s"] == pytest.approx((len(statuses) - 1) * DT)
+    markers, texts = [], []
+    with (tmp_path / "run.mcap").open("rb") as f:
+        reader = make_reader(f, decoder_factories=[mcap_ros2.decoder.DecoderFactory()])
+        for _, ch, _, m in reader.iter_decoded_messages():
+            if ch.topic == "/agv/safety_fields":
+                markers.append(m)
+            elif ch.topic == "/agv/safety_status":
+                texts.append(m.data)
+    # written at t = 0 and at each change of the set or the status
+    assert texts[-1] == "protective" and "warning" in texts and texts[0] == "clear"
+    last = markers[-1].markers
+    assert [m.ns for m in last] == ["agv/protective", "agv/warning"]
+    assert last[0].header.frame_id == "agv/base_link"
+    assert (last[0].color.r, last[0].color.g) == pytest.approx(STATUS_RGB[PROTECTIVE][:2])
+    spec = sim.robots[0].safety
+    poly = spec.field_sets[int(sim.state.safety_set[0])].protective
+    assert [(p.x, p.y) for p in last[0].points] == [*poly, poly[0]]

@@ -32,6 +32,9 @@ from agvsim.sensors.safety_fields import (
 )
 from agvsim.sim.spec import RobotSpec
 
+#: how viewers colour a field set by its status: green clear, yellow warning, red protective
+STATUS_RGB = ((0.17, 0.63, 0.17), (1.0, 0.8, 0.0), (0.84, 0.15, 0.16))
+
 #: the commanded deceleration of robots with dynamics: zero wheel speed in one step
 EMERGENCY_DECEL = 1e9
 #: events counted per robot: column 0 warning, column 1 protective
@@ -166,6 +169,20 @@ class SafetyTable:
         return self.specs[k].field_sets[int(global_set - self.packed.first[k])].name
 
 
+def set_polygons(
+    spec: SafetyScannerSpec, j: int
+) -> list[tuple[str, tuple[tuple[float, float], ...]]]:
+    """``[("protective", polygon), ("warning", polygon)]`` of field set ``j`` of a scanner
+    (the warning one only when the set has it; none for ``j`` = -1), robot frame."""
+    if j < 0:
+        return []
+    f = spec.field_sets[j]
+    out = [("protective", f.protective)]
+    if f.warning is not None:
+        out.append(("warning", f.warning))
+    return out
+
+
 def robot_frame_points(
     ranges: np.ndarray, rel_angles: np.ndarray, mount: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -207,8 +224,10 @@ __all__ = [
     "EVENT_KINDS",
     "PROTECTIVE",
     "WARNING",
+    "STATUS_RGB",
     "SafetyTable",
     "count_events",
     "robot_frame_points",
     "select_sets",
+    "set_polygons",
 ]
