@@ -17,6 +17,7 @@ import numpy as np
 import viser
 
 from agvsim.app import fleet_view, shapes
+from agvsim.app.safety_view import FieldsView
 from agvsim.app.session import Session
 from agvsim.sim.spec import BODY_HEIGHT_M, WALL_HEIGHT_M
 from agvsim.world.grid import OccupancyGrid
@@ -71,6 +72,7 @@ class SceneView:
         self._markers: list[Any] = []
         self._layout_nodes: list[Any] = []  # the scenario's layout: nodes, edges, stations
         self._boxes: list[Any] = []  # the world's static boxes (racks, pallets)
+        self._fields = FieldsView()  # safety scanners' field sets (app.safety_view)
         self._frame = 0
         self.frames_sent = 0
         server.scene.set_up_direction("+z")
@@ -159,6 +161,7 @@ class SceneView:
         for old in self._robots:
             old.frame.remove()
         self._robots = []
+        self._fields.clear()
         sim = self.session.sim
         cfg_by_name = {r["name"]: r for r in self.session.config["robots"]}
         for i, spec in enumerate(sim.robots):
@@ -275,6 +278,7 @@ class SceneView:
             markers = sim.world.appearance.markers
             trails = [np.array(h.trail) for h in s.history.values()] if self.show_trails else []
             kinds = _sensor_kinds(s.config, table)
+            specs, safety = sim.robots, (st.safety_set.copy(), st.safety_status.copy())
         with self.server.atomic():
             if world != self._world or layout != self._layout:
                 if world != self._world:
@@ -291,6 +295,7 @@ class SceneView:
                 for k, node in enumerate(nodes.wheels):
                     node.wxyz = q[k]
             self._update_beams(table, poses, scans, kinds)
+            self._fields.update(self.server, specs, *safety)
             if self._frame % 10 == 0:
                 self._update_trails(trails)
         self._frame += 1
