@@ -160,7 +160,6 @@ def test_steering_selects_the_field_set_of_a_car_like_model():
 SPEEDS = (0.25, 0.5, 0.75, 1.0)  # fractions of the top speed
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("model", list(PARAMS))
 def test_a_box_ahead_stops_every_model_before_contact_from_every_speed(model):
     for frac in SPEEDS:
@@ -335,3 +334,26 @@ def test_run_outputs_carry_the_safety_status_events_and_field_markers(tmp_path):
     spec = sim.robots[0].safety
     poly = spec.field_sets[int(sim.state.safety_set[0])].protective
     assert [(p.x, p.y) for p in last[0].points] == [*poly, poly[0]]
+
+
+def test_the_shipped_scenario_stops_every_agv_and_lets_the_blocked_one_drive_on():
+    from pathlib import Path
+
+    from agvsim.scenario import load_scenario
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "safety_fields.yaml"
+    sim = build(load_scenario(path))
+    k = sim.robot_index("differential")
+    resumed = False
+    while sim.state.t_s < 36.0 - 1e-9:
+        sim.step()
+        st = sim.state
+        # stopped for the cart (its first protective stop), then back at its 0.8 m/s
+        resumed |= bool(st.safety_events[k, 1] == 1 and st.twists[k, 0] == 0.8)
+    st = sim.state
+    scanners = [i for i, r in enumerate(sim.robots) if r.safety is not None]
+    assert len(scanners) == 5 and st.collisions.sum() == 0
+    assert (st.safety_events[scanners, 1] >= 1).all()  # every AGV had a protective stop
+    assert (st.safety_events[scanners, 0] >= 1).all()  # after a warning
+    assert np.abs(st.twists[scanners, 0]).max() == 0.0  # and stands before its box
+    assert resumed and st.safety_events[k, 1] == 2

@@ -3,6 +3,7 @@
 Each step, for every robot together (structure of arrays, a loop over model kinds only):
 
     commands  = controllers(observations)
+    commands  = safety(commands, scans)      # only robots with a safety scanner: brake, cap
     wheels    = actuate(commands)            # inverse or forward kinematics, limits
     wheels    = dynamics(wheels)             # only robots with dynamics: forces, slip
     poses     = move(poses, wheels.twist)    # exact SE(2) integration, swept collision checks
