@@ -161,10 +161,7 @@ class Simulation:
         #: the safety scanners (None without any: those runs pay nothing)
         self.safety: SafetyTable | None = None
         if any(r.safety is not None for r in self.robots):
-            self.safety = SafetyTable.build(
-                self.robots,
-                [{self.sensors.specs[k].name: k for k in ks} for ks in self.sensors.slots_of],
-            )
+            self.safety = SafetyTable.build(self.robots, self.sensors)
         self.reset(seed)
 
     # ------------------------------------------------------------------ set-up
@@ -510,10 +507,7 @@ class Simulation:
         # standing in a short field must not start at a speed the field is too short for
         speed = np.where(np.abs(cmd[:, 0]) > np.abs(prev[:, 0]), cmd[:, 0], prev[:, 0])
         active = tab.active_sets(speed, st.steering[idx])
-        slots = tab.slots
-        status = tab.status(
-            st.scans[slots], self.sensors.rel_angles[slots], self.sensors.mount[slots], active
-        )
+        status = tab.status(st.scans[tab.slots], active)
         # a protective stop holds until the robot stands, even if a slower field set no
         # longer sees the obstacle on the way down
         moving = (np.hypot(prev[:, 0], prev[:, 1]) > 1e-4) | (np.abs(prev[:, 2]) > 1e-4)

@@ -31,6 +31,7 @@ from agvsim.sensors.safety_fields import (
     field_status,
 )
 from agvsim.sim.spec import RobotSpec
+from agvsim.sim.state import SensorTable
 
 #: how viewers colour a field set by its status: green clear, yellow warning, red protective
 STATUS_RGB = ((0.17, 0.63, 0.17), (1.0, 0.8, 0.0), (0.84, 0.15, 0.16))
@@ -69,6 +70,8 @@ class SafetyTable:
 
     robots: np.ndarray  # (K,) robot indices
     slots: np.ndarray  # (K,) sensor-table slot of each scanner's range sensor
+    cos_sin: np.ndarray  # (K, B, 2) each beam's direction in the robot frame (NaN: padding)
+    mount_xy: np.ndarray  # (K, 2) the sensors' positions in the robot frame
     specs: tuple[SafetyScannerSpec, ...]
     packed: PackedFields
     n_sets: np.ndarray  # (K,)
@@ -78,8 +81,9 @@ class SafetyTable:
     warn_speed_m_s: np.ndarray  # (K,)
 
     @classmethod
-    def build(cls, robots: Sequence[RobotSpec], slot_of: Sequence[dict[str, int]]) -> SafetyTable:
-        """``slot_of[i]``: robot i's range sensors by name -> slot."""
+    def build(cls, robots: Sequence[RobotSpec], sensors: SensorTable) -> SafetyTable:
+        """The scanners of ``robots`` on their sensors' slots of ``sensors``."""
+        slot_of = [{sensors.specs[k].name: k for k in ks} for ks in sensors.slots_of]
         idx, slots, specs = [], [], []
         for i, r in enumerate(robots):
             if r.safety is None:
@@ -97,9 +101,15 @@ class SafetyTable:
             for s in specs
             for f in s.field_sets
         ]
+        sl = np.asarray(slots, dtype=np.int64)
+        # each beam's direction in the robot frame, worked out once: the stage then needs
+        # no trigonometry (NaN-padded beams point nowhere and never count)
+        angle = sensors.rel_angles[sl] + sensors.mount[sl, 2:3]
         return cls(
             robots=np.asarray(idx, dtype=np.int64),
-            slots=np.asarray(slots, dtype=np.int64),
+            slots=sl,
+            cos_sin=np.stack([np.cos(angle), np.sin(angle)], axis=-1),
+            mount_xy=sensors.mount[sl, :2].copy(),
             specs=tuple(specs),
             packed=PackedFields.of(specs),
             n_sets=np.asarray([len(s.field_sets) for s in specs], dtype=np.int64),
@@ -131,12 +141,10 @@ class SafetyTable:
             self.ranges,
         )
 
-    def status(
-        self, scans: np.ndarray, rel_angles: np.ndarray, mount: np.ndarray, active: np.ndarray
-    ) -> np.ndarray:
+    def status(self, scans: np.ndarray, active: np.ndarray) -> np.ndarray:
         """(K,) CLEAR / WARNING / PROTECTIVE from each scanner's latest ranges ``scans``
-        (K, B), beam angles ``rel_angles`` (K, B, NaN padded) and mounts ``mount`` (K, 3)."""
-        points, valid = robot_frame_points(scans, rel_angles, mount)
+        (K, B) and active field sets ``active`` (K,)."""
+        points, valid = robot_frame_points(scans, self.cos_sin, self.mount_xy)
         p = self.packed
         return field_status(points, valid, active, p.verts, p.start, p.count, p.prot, p.warn)
 
@@ -184,18 +192,16 @@ def set_polygons(
 
 
 def robot_frame_points(
-    ranges: np.ndarray, rel_angles: np.ndarray, mount: np.ndarray
+    ranges: np.ndarray, cos_sin: np.ndarray, mount_xy: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Batched ``scan_points_robot_frame``: points (K, B, 2) in the robot frame and which
-    beams are returns (+inf: no return, NaN: a padded or dropped beam; -inf, closer than the
-    sensor's minimum, is a return at the sensor)."""
+    """Batched ``scan_points_robot_frame``: points (K, B, 2) in the robot frame from ranges
+    (K, B), beam directions ``cos_sin`` (K, B, 2) and sensor positions ``mount_xy`` (K, 2),
+    and which beams are returns (+inf: no return, NaN: a padded or dropped beam; -inf, closer
+    than the sensor's minimum, is a return at the sensor)."""
     r = np.asarray(ranges, dtype=np.float64)
-    valid = ~np.isnan(r) & ~np.isposinf(r) & ~np.isnan(rel_angles)
+    valid = ~np.isnan(r) & ~np.isposinf(r) & ~np.isnan(cos_sin[..., 0])
     rr = np.where(valid, np.maximum(r, 0.0), 0.0)
-    a = np.where(valid, rel_angles, 0.0) + mount[:, 2:3]
-    pts = np.empty(r.shape + (2,))
-    pts[..., 0] = mount[:, 0:1] + rr * np.cos(a)
-    pts[..., 1] = mount[:, 1:2] + rr * np.sin(a)
+    pts = mount_xy[:, None, :] + rr[..., None] * np.where(valid[..., None], cos_sin, 0.0)
     return pts, valid
 
 
