@@ -357,3 +357,22 @@ def test_the_shipped_scenario_stops_every_agv_and_lets_the_blocked_one_drive_on(
     assert (st.safety_events[scanners, 0] >= 1).all()  # after a warning
     assert np.abs(st.twists[scanners, 0]).max() == 0.0  # and stands before its box
     assert resumed and st.safety_events[k, 1] == 2
+
+
+def test_batched_scan_points_match_the_one_scan_function():
+    from agvsim.sensors.safety_fields import scan_points_robot_frame
+    from agvsim.sim.safety import robot_frame_points
+
+    rng = np.random.default_rng(0)
+    r = rng.uniform(0, 5, (3, 10))
+    r[0, 1], r[1, 2], r[2, 3] = np.inf, -np.inf, np.nan  # no return, too close, dropped
+    ang = np.linspace(-3, 3, 10)[None].repeat(3, 0)
+    ang[2, 8:] = np.nan  # a sensor with 8 beams in a table 10 wide
+    mount = np.array([[0.1, 0.2, 0.3], [0.0, 0.0, 0.0], [-0.2, 0.1, -1.0]])
+    a = ang + mount[:, 2:3]
+    pts, valid = robot_frame_points(r, np.stack([np.cos(a), np.sin(a)], -1), mount[:, :2].copy())
+    for k, n in enumerate((10, 10, 8)):
+        one, ok = scan_points_robot_frame(r[k, :n], ang[k, :n], tuple(mount[k, :2]), mount[k, 2])
+        assert ok.tolist() == valid[k, :n].tolist() and not valid[k, n:].any()
+        np.testing.assert_allclose(pts[k, :n][ok], one[ok], atol=1e-12)
+    assert valid[1, 2] and pts[1, 2].tolist() == [0.0, 0.0]  # -inf: a return at the sensor

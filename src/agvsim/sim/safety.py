@@ -144,7 +144,9 @@ class SafetyTable:
     def status(self, scans: np.ndarray, active: np.ndarray) -> np.ndarray:
         """(K,) CLEAR / WARNING / PROTECTIVE from each scanner's latest ranges ``scans``
         (K, B) and active field sets ``active`` (K,)."""
-        points, valid = robot_frame_points(scans, self.cos_sin, self.mount_xy)
+        points, valid = robot_frame_points(
+            np.ascontiguousarray(scans, dtype=np.float64), self.cos_sin, self.mount_xy
+        )
         p = self.packed
         return field_status(points, valid, active, p.verts, p.start, p.count, p.prot, p.warn)
 
@@ -191,6 +193,7 @@ def set_polygons(
     return out
 
 
+@nb.njit(cache=True)
 def robot_frame_points(
     ranges: np.ndarray, cos_sin: np.ndarray, mount_xy: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -198,10 +201,20 @@ def robot_frame_points(
     (K, B), beam directions ``cos_sin`` (K, B, 2) and sensor positions ``mount_xy`` (K, 2),
     and which beams are returns (+inf: no return, NaN: a padded or dropped beam; -inf, closer
     than the sensor's minimum, is a return at the sensor)."""
-    r = np.asarray(ranges, dtype=np.float64)
-    valid = ~np.isnan(r) & ~np.isposinf(r) & ~np.isnan(cos_sin[..., 0])
-    rr = np.where(valid, np.maximum(r, 0.0), 0.0)
-    pts = mount_xy[:, None, :] + rr[..., None] * np.where(valid[..., None], cos_sin, 0.0)
+    k_n, b_n = ranges.shape
+    pts = np.zeros((k_n, b_n, 2))
+    valid = np.zeros((k_n, b_n), dtype=np.bool_)
+    for k in range(k_n):
+        mx, my = mount_xy[k, 0], mount_xy[k, 1]
+        for b in range(b_n):
+            r, c = ranges[k, b], cos_sin[k, b, 0]
+            if np.isnan(r) or np.isnan(c) or r == np.inf:
+                pts[k, b, 0], pts[k, b, 1] = mx, my
+                continue
+            valid[k, b] = True
+            r = max(r, 0.0)
+            pts[k, b, 0] = mx + r * c
+            pts[k, b, 1] = my + r * cos_sin[k, b, 1]
     return pts, valid
 
 
