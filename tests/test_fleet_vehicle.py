@@ -443,3 +443,36 @@ def test_state_factsheet_requests_and_init_position(tmp_path: Path) -> None:
     s = r.states()[-1]
     assert statuses(s) == {"s": "FINISHED", "f": "FINISHED", "bad": "FAILED", "good": "FINISHED"}
     assert s["lastNodeId"] == "X" and s["errors"][-1]["errorType"] == "actionError"
+
+
+def test_a_robot_safety_scanner_reports_its_protective_field_violation(tmp_path: Path) -> None:
+    # the robot's own safety: block replaces the fleet's path-shaped field: the engine's
+    # safety stage brakes, the vehicle reports safetyState.fieldViolation from the same field
+    import yaml
+
+    path = room_scenario(tmp_path, [("agv1", "differential", "r4c1", 0.0)])
+    data = yaml.safe_load(path.read_text())
+    # 1 m/s x (0.1 s response + 0.05 s scan) + 1 / (2 x 1 m/s^2) + 0.25 m body = 1.0 m
+    field = [[-0.35, -0.3], [1.1, -0.3], [1.1, 0.3], [-0.35, 0.3]]
+    data["robots"][0]["safety"] = {
+        "sensor": "lidar",
+        "check_lengths": False,  # long enough for the fleet's 1 m/s, not the wheels' 2 m/s
+        "field_sets": [{"name": "all", "protective": field}],
+    }
+    path.write_text(yaml.safe_dump(data))
+    r = Run(build_fleet(load_scenario(path), epoch=EPOCH))
+    assert r.v()._fields is not None
+    r.v().receive("order", order(r.fleet.layout, ROW4))
+    r.step(10)
+    r.sim.set_boxes(np.array([[1.0, 0.0, 0.0, 0.15, 0.15]]))  # on the path
+    r.until(lambda: r.v().field_violation, 10, "field violation")
+    assert r.sim.state.safety_status[0] == 2  # the engine sees the same protective violation
+    s = r.last_state()
+    assert s["safetyState"]["fieldViolation"]
+    r.step(40)
+    stop = r.pose()
+    assert 0.15 < 1.0 - stop[0] - 0.25  # stands short of the box
+    assert r.sim.state.collisions.sum() == 0
+    r.sim.set_boxes(np.zeros((0, 5)))
+    r.until(lambda: r.v().last_node.node_id == "r4c5", 10, "resumed to the end")
+    assert not r.last_state()["safetyState"]["fieldViolation"]

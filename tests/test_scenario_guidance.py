@@ -7,7 +7,13 @@ import math
 import pytest
 from pydantic import ValidationError
 
-from agvsim.scenario_guidance import SafetyConfig, TapeConfig, build_safety, build_tape
+from agvsim.scenario_guidance import (
+    SafetyConfig,
+    TapeConfig,
+    build_tape,
+    safety_problems,
+    safety_spec,
+)
 
 FIELD = [[0.0, -0.3], [0.6, -0.3], [0.6, 0.3], [0.0, 0.3]]
 
@@ -40,9 +46,22 @@ def test_fields_too_short_or_missing_speeds_are_refused_naming_the_block():
             {"name": "slow", "protective": FIELD, "speed_min_m_s": -0.1, "speed_max_m_s": 0.5}
         ],
     )
-    with pytest.raises(ValueError, match=r"robots\[0\].safety: no field set is active between"):
-        build_safety(cfg, "robots[0].safety", 0.3, 0.3, 1.0, 0.0)
-    spec = build_safety(cfg, "robots[0].safety", 0.3, 0.3, 0.49, 0.0)
+    spec = safety_spec(cfg, "robots[0].safety")
+    problems = safety_problems(cfg, spec, "robots[0].safety", ["lidar"], 0.3, 0.3, 1.0)
+    # FIELD reaches 0.6 m ahead: 0.3 m body + 0.5 x 0.1 + 0.5^2 / 2 = 0.475 m needed at 0.5
+    # m/s; behind it reaches nothing though the set is active backing at 0.1 m/s; and no set
+    # covers [-1, -0.1) nor [0.5, 1]
+    assert problems[0].startswith("robots[0].safety.field_sets[0]: the protective field ")
+    assert "reaches 0.000 m behind but at 0.100 m/s the vehicle needs 0.315 m" in problems[0]
+    assert "no field set is active between -1.000 and -0.100 m/s" in problems[1]
+    assert "no field set is active between 0.500 and 1.000 m/s" in problems[2]
+    assert len(problems) == 3 and problems[2].endswith(
+        "check_lengths: false to run with them anyway)"
+    )
+    # a sensor the robot does not have
+    assert safety_problems(cfg, spec, "r.safety", ["front"], 0.3, 0.3, 0.0)[0].startswith(
+        "r.safety.sensor: 'lidar' is not a range sensor of this robot"
+    )
     assert spec.select(0.2) == 0
     with pytest.raises(ValidationError, match="NaN"):
         SafetyConfig(

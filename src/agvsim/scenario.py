@@ -20,7 +20,7 @@ from pydantic import ValidationError
 from agvsim.behaviours import BEHAVIOURS
 from agvsim.control.api import ControllerContext
 from agvsim.control.traffic import KeepClear, RobotSight, StaticMap, sight_sensor
-from agvsim.dynamics.vehicle import check_dynamics
+from agvsim.dynamics.vehicle import Dynamics, check_dynamics
 from agvsim.kinematics import wrap_angle
 from agvsim.safe_yaml import YamlInputError, load_yaml, load_yaml_file, measure_data
 from agvsim.scenario_controllers import cone_beams as cone_beams  # re-exported
@@ -33,6 +33,9 @@ from agvsim.scenario_guidance import (
     build_tape,
     floor_camera_spec,
     line_sensor_spec,
+    safety_problems,
+    safety_spec,
+    top_speed_m_s,
 )
 from agvsim.scenario_limits import (
     MAX_MAGNITUDE,
@@ -58,7 +61,7 @@ from agvsim.sensors.camera import CameraSpec
 from agvsim.sensors.floor_codes import FloorCameraSpec
 from agvsim.sensors.line_sensor import LineSensorSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
-from agvsim.sim.engine import Binding, Simulation
+from agvsim.sim.engine import S_MAX, W_MAX, Binding, Simulation
 from agvsim.sim.spec import (
     BODY_HEIGHT_M,
     WALL_HEIGHT_M,
@@ -411,6 +414,7 @@ def _robot_spec(rc: RobotConfig, where: str, dt_s: float) -> RobotSpec:
         dynamics=dynamics_spec(rc.dynamics, offset),
         line_sensors=tuple(lines),
         floor_cameras=tuple(floor_cams),
+        safety=None if rc.safety is None else safety_spec(rc.safety, f"{where}.safety"),
     )
     if spec.dynamics is not None:
         try:
@@ -515,6 +519,7 @@ def _build(sc: Scenario, seed: int | None, base_dir: Path | None) -> Simulation:
     except ValueError as err:
         raise ScenarioError("", [f"world.{err}"]) from None
     world = World(grid, boxes, look, floor=floor_spec(sc.world.floor), **_guidance_world(sc))
+    _check_safety(sc, specs, world)
     bindings = _bindings(sc, specs, base, grid, boxes, world)
     sim = Simulation(
         world,
@@ -545,6 +550,34 @@ def _guidance_world(sc: Scenario) -> dict:
         except ValueError as err:
             raise ScenarioError("", [f"world.{key}: {err}"]) from None
     return out
+
+
+def _check_safety(sc: Scenario, specs: list[RobotSpec], world: World) -> None:
+    """Every robot's safety scanner reads one of its range sensors and has fields long enough
+    to stop in from its top speed (with dynamics: at what its wheels can brake on the floor)."""
+    problems: list[str] = []
+    for i, (rc, spec) in enumerate(zip(sc.robots, specs, strict=True)):
+        if rc.safety is None or spec.safety is None:
+            continue
+        hl = spec.body_length_m / 2.0
+        limit = None
+        if spec.dynamics is not None:
+            dyn = Dynamics([spec], world.floor, W_MAX, S_MAX)
+            ahead, behind = (dyn.braking_deceleration_m_s2(0, None, a) for a in (0.0, np.pi))
+            limit = min(ahead, behind)
+        problems += safety_problems(
+            rc.safety,
+            spec.safety,
+            f"robots[{i}] ({rc.name}).safety",
+            [s.name for s in spec.sensors],
+            spec.body_offset_x_m + hl,
+            hl - spec.body_offset_x_m,
+            top_speed_m_s(spec.model),
+            limit,
+            next((1.0 / s.rate_hz for s in spec.sensors if s.name == spec.safety.sensor), 0.0),
+        )
+    if problems:
+        raise ScenarioError("", problems)
 
 
 def _check_placement(sim: Simulation) -> None:

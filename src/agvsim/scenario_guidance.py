@@ -12,14 +12,18 @@ agvsim.sensors.safety_fields, line_sensor, floor_codes, reflectors).
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import replace
 from typing import Annotated, Literal
 
+import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
 from agvsim.config_base import StrictConfig, construct
 from agvsim.control.api import ControllerContext
 from agvsim.control.line_follow import LineFollower
 from agvsim.control.route_follow import RouteFollower
+from agvsim.kinematics.base import KinematicModel
 from agvsim.scenario_controllers import ControllerConfigBase
 from agvsim.sensors.floor_codes import FloorCameraSpec, FloorCodeGrid
 from agvsim.sensors.line_sensor import LineSensorSpec
@@ -164,23 +168,14 @@ def build_floor_codes(cfg: FloorCodesConfig) -> FloorCodeGrid:
 
 
 def build_reflectors(cfg: ReflectorsConfig) -> ReflectorMap:
-    import numpy as np
-
     return ReflectorMap(np.asarray(cfg.points, dtype=np.float64).reshape(-1, 2), cfg.width_m)
 
 
-def build_safety(
-    cfg: SafetyConfig,
-    where: str,
-    front_m: float,
-    rear_m: float,
-    max_speed_m_s: float,
-    max_reverse_m_s: float,
-) -> SafetyScannerSpec:
-    """The scanner, with its fields checked against the robot's stopping distance at the
-    speeds it can drive (``where`` names the block in messages)."""
+def safety_spec(cfg: SafetyConfig, where: str) -> SafetyScannerSpec:
+    """The scanner of a robot's ``safety:`` block (``where`` names the block in messages);
+    its lengths are checked by :func:`safety_problems` once the robot is known."""
     try:
-        spec = SafetyScannerSpec(
+        return SafetyScannerSpec(
             cfg.sensor,
             tuple(
                 FieldSet(
@@ -200,15 +195,67 @@ def build_safety(
         )
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from None
-    if cfg.check_lengths:
-        problems = check_fields(spec, front_m, rear_m, max_speed_m_s, max_reverse_m_s)
-        if problems:
-            raise ValueError(
-                f"{where}: "
-                + "; ".join(problems)
-                + " (set check_lengths: false to run with them anyway)"
-            )
-    return spec
+
+
+def top_speed_m_s(model: KinematicModel) -> float:
+    """The fastest straight drive (m/s) the model's wheel-speed limit allows: the limit over
+    the fastest wheel's spin per m/s of forward speed (inverse kinematics of (1, 0, 0))."""
+    spin = float(np.abs(np.asarray(model.inverse(np.array([[1.0, 0.0, 0.0]])).speeds)).max())
+    limit = float(np.min(np.asarray(model.max_wheel_speed_rad_s)))
+    return limit / spin if spin > 0 else math.inf
+
+
+def safety_problems(
+    cfg: SafetyConfig,
+    spec: SafetyScannerSpec,
+    where: str,
+    sensor_names: list[str],
+    front_m: float,
+    rear_m: float,
+    top_speed: float,
+    decel_limit_m_s2: float | None = None,
+    scan_period_s: float = 0.0,
+) -> list[str]:
+    """What is wrong with a robot's scanner, one message each naming ``where`` (the robot's
+    ``safety`` block) and its field sets: a ``sensor`` that is not one of the robot's range
+    sensors (``sensor_names``), and (unless ``check_lengths: false``) protective fields too
+    short to stop in at ``top_speed`` m/s forwards and backwards. ``decel_limit_m_s2``: the
+    most the robot's dynamics can brake; below ``decel_m_s2`` it is what the check uses.
+    ``scan_period_s``: the sensor's period, which adds to the response time (a return can
+    enter the field just after a scan and is seen one period later)."""
+    out: list[str] = []
+    if spec.sensor not in sensor_names:
+        out.append(
+            f"{where}.sensor: {spec.sensor!r} is not a range sensor of this robot "
+            f"(its lidar / rangers sensors: {sensor_names}; give the sensor's 'name')"
+        )
+    if not cfg.check_lengths:
+        return out
+    used = replace(spec, response_time_s=spec.response_time_s + scan_period_s)
+    note = (
+        f" (the response counts response_time_s {spec.response_time_s:g} s and the "
+        f"sensor's scan period {scan_period_s:g} s)"
+        if scan_period_s > 0
+        else ""
+    )
+    if decel_limit_m_s2 is not None and decel_limit_m_s2 < spec.decel_m_s2:
+        used = replace(used, decel_m_s2=max(decel_limit_m_s2, 1e-9))
+        note += (
+            f" (decel_m_s2 {spec.decel_m_s2:g} is not reachable: the robot's dynamics brake at "
+            f"most {decel_limit_m_s2:.3f} m/s^2 on this floor, dynamics.braking's limit, "
+            "which this check uses)"
+        )
+    names = {f.name: j for j, f in enumerate(spec.field_sets)}
+    for problem in check_fields(used, front_m, rear_m, top_speed, top_speed):
+        head = re.match(r"field set '(.*?)': ", problem)
+        if head and head.group(1) in names:
+            j = names[head.group(1)]
+            out.append(f"{where}.field_sets[{j}]: {problem[head.end() :]}{note}")
+        else:
+            out.append(f"{where}.field_sets: {problem}{note}")
+    if len(out) > (spec.sensor not in sensor_names):
+        out[-1] += " (or set check_lengths: false to run with them anyway)"
+    return out
 
 
 def line_sensor_spec(cfg: LineSensorConfig, name: str) -> LineSensorSpec:

@@ -56,6 +56,7 @@ from agvsim.scenario_guidance import (
     FloorCodesConfig,
     LineSensorConfig,
     ReflectorsConfig,
+    SafetyConfig,
     TapeConfig,
 )
 from agvsim.scenario_params import PARAMS
@@ -336,6 +337,9 @@ class _RobotBase(StrictConfig):
     slam: SlamBlock | None = None
     dynamics: DynamicsConfig | None = Field(
         default=None, description="mass, motors, friction (agvsim.dynamics); none: kinematic"
+    )
+    safety: SafetyConfig | None = Field(
+        default=None, description="a safety laser scanner's field sets (docs/safety_fields.md)"
     )
 
     @field_validator("color")

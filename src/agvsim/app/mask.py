@@ -145,6 +145,8 @@ def fields_in_error(problems: list[str], robot: dict) -> dict[str, str]:
             out.setdefault(target if key else f"sensors.{kind}", text)
         elif head == "controller":
             out.setdefault("controller.settings", text)
+        elif head == "safety":
+            out.setdefault("safety", text)
     return out
 
 
@@ -255,7 +257,36 @@ def mask_fields(robot: dict, allow_python: bool = False, dt_s: float = DEFAULT_D
             hint="YAML: the controller's keys as in a scenario file (see docs/scenario.md)",
         )
     )
+    out.append(safety_field(robot))
     return out
+
+
+def safety_field(robot: dict) -> Field:
+    """The robot's ``safety:`` block (a safety scanner's field sets) as YAML text."""
+    block = robot.get("safety")
+    text = "" if not block else yaml.safe_dump(block, sort_keys=False, default_flow_style=None)
+    return Field(
+        "safety",
+        "safety scanner",
+        "yaml",
+        text.strip(),
+        hint="YAML: the robot's safety: block (sensor, field_sets, response_time_s, ...; "
+        "docs/safety_fields.md); empty: no scanner",
+    )
+
+
+def _safety_from_mask(out: dict, text: str) -> None:
+    """The safety field's YAML into ``out`` (empty text: no scanner)."""
+    try:  # the scenario loader's bounded reader (size, depth, aliases)
+        block = load_yaml(text, "safety scanner") if text.strip() else None
+    except YamlInputError as err:
+        raise MaskError(str(err)) from None
+    if block is None:
+        out.pop("safety", None)
+    elif isinstance(block, dict):
+        out["safety"] = block
+    else:
+        raise MaskError(f"safety scanner: need 'key: value' lines, got {type(block).__name__}")
 
 
 class MaskError(ValueError):
@@ -319,6 +350,8 @@ def robot_from_mask(robot: dict, values: dict[str, Any], dt_s: float = DEFAULT_D
             )
         settings.pop("type", None)
         out["controller"] = {"type": ctype, **settings}
+    if "safety" in values:
+        _safety_from_mask(out, values["safety"] or "")
     return out
 
 

@@ -18,6 +18,7 @@ import viser
 
 from agvsim.app import fleet_view, shapes
 from agvsim.app.guidance_view import draw_guidance
+from agvsim.app.safety_view import FieldsView
 from agvsim.app.session import Session
 from agvsim.sim.spec import BODY_HEIGHT_M, WALL_HEIGHT_M
 from agvsim.world.grid import OccupancyGrid
@@ -73,6 +74,7 @@ class SceneView:
         self._layout_nodes: list[Any] = []  # the scenario's layout: nodes, edges, stations
         self._boxes: list[Any] = []  # the world's static boxes (racks, pallets)
         self._guidance: list[Any] = []  # tape, spots, floor codes, reflectors
+        self._fields = FieldsView()  # safety scanners' field sets (app.safety_view)
         self._frame = 0
         self.frames_sent = 0
         server.scene.set_up_direction("+z")
@@ -162,6 +164,7 @@ class SceneView:
         for old in self._robots:
             old.frame.remove()
         self._robots = []
+        self._fields.clear()
         sim = self.session.sim
         cfg_by_name = {r["name"]: r for r in self.session.config["robots"]}
         for i, spec in enumerate(sim.robots):
@@ -278,6 +281,7 @@ class SceneView:
             markers = sim.world.appearance.markers
             trails = [np.array(h.trail) for h in s.history.values()] if self.show_trails else []
             kinds = _sensor_kinds(s.config, table)
+            specs, safety = sim.robots, (st.safety_set.copy(), st.safety_status.copy())
         with self.server.atomic():
             if world != self._world or layout != self._layout:
                 if world != self._world:
@@ -294,6 +298,7 @@ class SceneView:
                 for k, node in enumerate(nodes.wheels):
                     node.wxyz = q[k]
             self._update_beams(table, poses, scans, kinds)
+            self._fields.update(self.server, specs, *safety)
             if self._frame % 10 == 0:
                 self._update_trails(trails)
         self._frame += 1

@@ -300,8 +300,8 @@ class Dynamics:
         self.last_substeps = nsub
         self.brakes.update(t_s, poses, twist, dt, speed[:, 0], speed[:, 1], braking, vel0)
         for d in self.brakes.started:  # the closed form as loaded and on the floor now
-            stop = self.brakes.active[d]
-            assert stop is not None
+            # a stop may begin and end in one step: it is then the last event
+            stop = self.brakes.active[d] or self.brakes.events[d][-1]
             mu_w = self._mu_under(d, stop.pose)
             stop.mu = float(mu_w.min())
             stop.deceleration_m_s2 = braking_deceleration_m_s2(

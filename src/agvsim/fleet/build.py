@@ -110,11 +110,13 @@ def build_fleet(sc: Scenario, epoch: datetime | None = None, seed: int | None = 
     epoch = epoch or datetime.now(UTC)
     dialect = DIALECTS[cfg.version]
     vehicles: list[Vehicle] = []
-    groups: dict[int | None, list[tuple[int, Vehicle]]] = {}
+    groups: dict[tuple[str, int] | None, list[tuple[int, Vehicle]]] = {}
     for v in cfg.vehicles:
         i = names.index(v.robot)
         spec = base_sim.robots[i]
-        sensor = next((s for s in spec.sensors if s.name == cfg.safety_sensor), None)
+        # the robot's own safety scanner's sensor (its safety: block), else the fleet's
+        wanted = cfg.safety_sensor if spec.safety is None else spec.safety.sensor
+        sensor = next((s for s in spec.sensors if s.name == wanted), None)
         lidar = None
         if sensor is not None:
             ang = sensor.beam_angles_rad + sensor.mount_yaw_rad
@@ -134,12 +136,12 @@ def build_fleet(sc: Scenario, epoch: datetime | None = None, seed: int | None = 
         )
         veh = Vehicle(vc, spec, layout, lidar, v.start_node, epoch, Battery(v.battery_pct))
         vehicles.append(veh)
-        key = None if sensor is None else sensor.num_beams
+        key = None if sensor is None else (sensor.name, sensor.num_beams)
         groups.setdefault(key, []).append((i, veh))
     bindings = list(base_sim.bindings)
     for key, members in groups.items():
         idx = tuple(i for i, _ in members)
-        sensor_name = None if key is None else cfg.safety_sensor
+        sensor_name = None if key is None else key[0]
         bindings.append(Binding(FleetDriver([veh for _, veh in members], sensor_name), idx, True))
     sim = Simulation(
         base_sim.world,

@@ -31,6 +31,7 @@ from agvsim.fleet.dialect import V2, Dialect, Problem
 from agvsim.fleet.intake import decode
 from agvsim.fleet.motion import Leg
 from agvsim.fleet.order import Action, Limits, OrderEdge, OrderNode, OrderRefused, parse_order
+from agvsim.sensors.safety_fields import PROTECTIVE, PackedFields, field_status
 from agvsim.sim.spec import RobotSpec
 from agvsim.world.lif import Layout
 
@@ -101,6 +102,11 @@ class Vehicle:
         self._front_m = spec.body_offset_x_m + hl
         self._half_width_m = hw + cfg.field_side_margin_m
         self._mount_m = 0.0 if lidar is None else math.hypot(*lidar.mount_xy)
+        # with the robot's own safety scanner (its ``safety:`` block, read on ``lidar``) the
+        # protective field is the scanner's; without, a field along the path (fleet.safety)
+        self._fields = (
+            None if spec.safety is None or lidar is None else PackedFields.of([spec.safety])
+        )
         self.inbox: deque[tuple[str, Any]] = deque()
         self.outbox: list[tuple[str, dict, bool]] = []
         # protocol state
@@ -155,7 +161,9 @@ class Vehicle:
         self.battery.update(dt, moved)
         tw = self._drive()
         violation = False
-        if tw != (0.0, 0.0, 0.0) and ranges is not None and self.lidar is not None:
+        if self._fields is not None:  # a safety scanner (safety: block): the engine brakes
+            violation = ranges is not None and self._scanner_violated(tw, ranges)
+        elif tw != (0.0, 0.0, 0.0) and ranges is not None and self.lidar is not None:
             violation = self._field_violated(tw, ranges)
             if violation:
                 tw = (0.0, 0.0, 0.0)
@@ -563,6 +571,31 @@ class Vehicle:
             self._traverse(n)
             return stop
         return tw
+
+    def _scanner_violated(self, tw: tuple, ranges: np.ndarray) -> bool:
+        """The robot's safety scanner sees a return in the protective field of the set active
+        for the faster of the commanded and the last speed (as the engine's safety stage)."""
+        sc, pk, lidar = self.spec.safety, self._fields, self.lidar
+        assert sc is not None and pk is not None and lidar is not None
+        v = tw[0] if abs(tw[0]) > abs(self.twist[0]) else self.twist[0]
+        wheelbase = float(np.asarray(getattr(self.spec.model, "wheelbase_m", 0.0)).flat[0])
+        steer = math.atan2(wheelbase * tw[2], v) if wheelbase > 0 and abs(v) > 1e-9 else 0.0
+        k = sc.select(v, steer)
+        r = np.asarray(ranges, dtype=np.float64)
+        valid = ~np.isnan(r) & ~np.isposinf(r)
+        rr = np.where(valid, np.maximum(r, 0.0), 0.0)[:, None]
+        pts = np.asarray(lidar.mount_xy, dtype=np.float64) + rr * lidar.dirs
+        status = field_status(
+            pts[None],
+            valid[None],
+            np.array([k], dtype=np.int64),
+            pk.verts,
+            pk.start,
+            pk.count,
+            pk.prot,
+            pk.warn,
+        )
+        return bool(status[0] == PROTECTIVE)
 
     def _field_violated(self, tw: tuple, ranges: np.ndarray) -> bool:
         assert self.lidar is not None and self.leg is not None

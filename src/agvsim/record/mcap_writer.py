@@ -31,6 +31,11 @@ topic                           type                         when
 /<robot>/slam/map               nav_msgs/OccupancyGrid       ``write_slam_map`` (online SLAM)
 /<robot>/wheel_slip             std_msgs/Float64MultiArray   pose rate, robots with dynamics:
                                                              slip speed of each wheel (m/s)
+/<robot>/safety_fields          visualization_msgs/          robots with a safety scanner, when
+                                MarkerArray                  the active field set or its status
+                                                             changes: its polygons (base_link),
+                                                             green / yellow / red by status
+/<robot>/safety_status          std_msgs/String              with it: clear, warning, protective
 ==============================  ===========================  ==================================
 
 LaserScan carries ``intensities`` when the world has reflectors (empty otherwise); the
@@ -177,6 +182,7 @@ class Recorder:
             )
         self._last_scan = np.full(tab.count, -np.inf)
         self._last_states: list[str | None] = [None] * sim.n
+        self._last_safety: dict[int, tuple[int, int]] = {}  # robot -> (set, status) written
         self._grid = None
         self._next_pose_s = -np.inf
         self._recorded_s = -np.inf
@@ -299,6 +305,8 @@ class Recorder:
         if self._camera_seq:
             self._write_cameras()
         self._write_states(t_ns)
+        if sim.safety is not None:
+            self._write_safety(t_ns)
         wall = time.perf_counter()
         if (
             t_s - self._last_flush_s >= self.flush_sim_s - 1e-9
@@ -383,6 +391,28 @@ class Recorder:
                     topic = f"/{self.robot_topics[i]}/state"
                     self._write(topic, msg.STRING, t_ns, msg.encode_string(name))
                 self._last_states[i] = name
+
+    def _write_safety(self, t_ns: int) -> None:
+        """Each scanner's active field set, coloured by its status, when either changes."""
+        from agvsim.sensors.safety_fields import STATUS_NAMES
+        from agvsim.sim.safety import STATUS_RGB, set_polygons
+
+        st = self.sim.state
+        for i in self.sim.safety.robots.tolist():
+            now = (int(st.safety_set[i]), int(st.safety_status[i]))
+            if self._last_safety.get(i) == now:
+                continue
+            self._last_safety[i] = now
+            rt, spec = self.robot_topics[i], self.sim.robots[i].safety
+            rgb = STATUS_RGB[now[1]]
+            markers = [
+                (f"{rt}/base_link", f"{rt}/{kind}", list(poly), rgb)
+                for kind, poly in set_polygons(spec, now[0])
+            ]
+            self._write(f"/{rt}/safety_fields", msg.MARKER_ARRAY, t_ns,
+                        msg.encode_footprints(t_ns, markers))  # fmt: skip
+            status = msg.encode_string(STATUS_NAMES[now[1]])
+            self._write(f"/{rt}/safety_status", msg.STRING, t_ns, status)
 
     # ------------------------------------------------------------------ public extras
     def write_occupancy(

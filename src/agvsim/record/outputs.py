@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from agvsim.sensors.safety_fields import STATUS_NAMES
 from agvsim.sim.engine import W_MAX, Simulation
 
 COLUMNS = (
@@ -31,6 +32,10 @@ DYNAMICS_COLUMNS = [
 # truth of that observation (the step's start: one step before the row's x, y), empty for
 # the other robots
 ESTIMATE_COLUMNS = ["est_x", "est_y", "est_theta", "est_error_m"]
+
+# appended only when a robot has a safety scanner (docs/safety_fields.md): its status after
+# the step's safety stage (clear / warning / protective), empty for robots without one
+SAFETY_COLUMNS = ["safety"]
 
 
 class TrajectoryWriter:
@@ -50,8 +55,11 @@ class TrajectoryWriter:
             if not b.batch and hasattr(b.controller, "estimate")
             for i in b.robots
         }
+        self._safety = sim.safety is not None
         head = COLUMNS + (DYNAMICS_COLUMNS if self._dyn else [])
-        self._f.write(",".join(head + (ESTIMATE_COLUMNS if self._est else [])) + "\n")
+        head += ESTIMATE_COLUMNS if self._est else []
+        self._f.write(",".join(head + (SAFETY_COLUMNS if self._safety else [])) + "\n")
+        self._has_safety = [r.safety is not None for r in sim.robots]
         self._names = [r.name for r in sim.robots]
         self._nw = [len(r.model.wheel_names) for r in sim.robots]
         self._has_dyn = [r.dynamics is not None for r in sim.robots]
@@ -77,6 +85,8 @@ class TrajectoryWriter:
                 line += "," + self._dynamics_cells(i)
             if self._est:
                 line += "," + self._estimate_cells(i)
+            if self._safety:
+                line += "," + (STATUS_NAMES[st.safety_status[i]] if self._has_safety[i] else "")
             lines.append(line + "\n")
         self._f.write("".join(lines))
         self.rows += len(lines)
@@ -152,6 +162,27 @@ def summary(sim: Simulation, wall_s: float, extra: dict[str, Any] | None = None)
     out: dict[str, Any] = {"run": run, "robots": robots}
     if sim.dynamics is not None:  # mass, motor energy, stops against the closed form
         out["dynamics"] = sim.dynamics.summary()
+    if sim.safety is not None:
+        out["safety"] = safety_summary(sim)
+    return out
+
+
+def safety_summary(sim: Simulation) -> dict[str, Any]:
+    """Per robot with a safety scanner: its warning and protective field violations (how
+    many began, when the first began, the last time a field was violated; null: never)."""
+    st, out = sim.state, {}
+    for i, r in enumerate(sim.robots):
+        if r.safety is None:
+            continue
+        row: dict[str, Any] = {"sensor": r.safety.sensor}
+        for col, kind in enumerate(("warning", "protective")):
+            first, last = st.safety_first_s[i, col], st.safety_last_s[i, col]
+            row[kind] = {
+                "count": int(st.safety_events[i, col]),
+                "first_t_s": None if np.isnan(first) else round(float(first), 6),
+                "last_t_s": None if np.isnan(last) else round(float(last), 6),
+            }
+        out[r.name] = row
     return out
 
 

@@ -3,6 +3,7 @@
 Each step, for every robot together (structure of arrays, a loop over model kinds only):
 
     commands  = controllers(observations)
+    commands  = safety(commands, scans)      # only robots with a safety scanner: brake, cap
     wheels    = actuate(commands)            # inverse or forward kinematics, limits
     wheels    = dynamics(wheels)             # only robots with dynamics: forces, slip
     poses     = move(poses, wheels.twist)    # exact SE(2) integration, swept collision checks
@@ -43,6 +44,7 @@ from agvsim.sim import observe
 from agvsim.sim.collide import Collider, box_pairs_overlapping
 from agvsim.sim.guidance import GuidanceRig
 from agvsim.sim.kernels import move_bodies, pair_faults
+from agvsim.sim.safety import PROTECTIVE, SafetyTable, count_events
 from agvsim.sim.spec import RobotSpec, World
 from agvsim.sim.state import ROBOT_ROWS, SensorTable, SimState  # noqa: F401 - in hints
 from agvsim.sim.watchdog import ControllerClock, TimeLimitExceeded, check_limit
@@ -162,6 +164,10 @@ class Simulation:
         self._static_tab = box_tables(world.boxes)
         self._mode_twist = np.array([r.mode == ControlMode.INVERSE for r in self.robots])
         self._batch_slots: dict[bytes, dict[str, tuple[slice | np.ndarray, int]]] = {}
+        #: the safety scanners (None without any: those runs pay nothing)
+        self.safety: SafetyTable | None = None
+        if any(r.safety is not None for r in self.robots):
+            self.safety = SafetyTable.build(self.robots, self.sensors)
         self.reset(seed)
 
     # ------------------------------------------------------------------ set-up
@@ -355,6 +361,8 @@ class Simulation:
     def step(self) -> None:
         """Advance the simulation by one kinematics step of ``dt_s`` seconds."""
         self._control()
+        if self.safety is not None:
+            self._guard()
         act = self._actuate()
         if self.dynamics is not None:
             self._apply_dynamics(act)
@@ -501,6 +509,63 @@ class Simulation:
             st.cmd_twist[i] = arr
         else:
             st.cmd_wheels[i, :width] = arr
+
+    def _guard(self) -> None:
+        """The safety stage (agvsim.sim.safety): the robots with a scanner get their
+        commands braked on a protective-field violation and capped on a warning."""
+        st, tab = self.state, self.safety
+        assert tab is not None
+        idx = tab.robots
+        is_tw = st.cmd_is_twist[idx]
+        cmd = np.zeros((len(idx), 3))
+        cmd[is_tw] = st.cmd_twist[idx[is_tw]]
+        if not is_tw.all():
+            cmd[~is_tw] = self._wheel_twists(idx[~is_tw])
+        prev = st.twists[idx]
+        # the field set of the faster of the speed driven and the speed commanded: a robot
+        # standing in a short field must not start at a speed the field is too short for
+        speed = np.where(np.abs(cmd[:, 0]) > np.abs(prev[:, 0]), cmd[:, 0], prev[:, 0])
+        active = tab.active_sets(speed, st.steering[idx])
+        status = tab.status(st.scans[tab.slots], active)
+        # a protective stop holds until the robot stands, even if a slower field set no
+        # longer sees the obstacle on the way down
+        moving = (np.hypot(prev[:, 0], prev[:, 1]) > 1e-4) | (np.abs(prev[:, 2]) > 1e-4)
+        status[(st.safety_status[idx] == PROTECTIVE) & moving] = PROTECTIVE
+        since = st.safety_since_s[idx]
+        out = tab.brake(cmd, prev, status, since, st.t_s, self.dt_s)
+        st.cmd_twist[idx[is_tw]] = out[is_tw]
+        if not is_tw.all():
+            fw = idx[~is_tw]
+            v_cmd = np.hypot(cmd[~is_tw, 0], cmd[~is_tw, 1])
+            v_out = np.hypot(out[~is_tw, 0], out[~is_tw, 1])
+            still = ~np.any(out[~is_tw] != 0.0, axis=1)
+            scale = np.where(v_cmd > 1e-12, np.minimum(1.0, v_out / np.maximum(v_cmd, 1e-300)), 1.0)
+            scale[still] = 0.0
+            for i, k in zip(fw, scale, strict=True):  # driven wheels; steering kept
+                st.cmd_wheels[i, : len(self.robots[i].model.driven_wheels)] *= k
+        events, first, last = st.safety_events[idx], st.safety_first_s[idx], st.safety_last_s[idx]
+        count_events(st.safety_status[idx], status, st.t_s, events, first, last)
+        st.safety_events[idx], st.safety_first_s[idx], st.safety_last_s[idx] = events, first, last
+        st.safety_status[idx] = status
+        st.safety_since_s[idx] = since
+        st.safety_set[idx] = np.where(active >= 0, active - tab.packed.first, -1)
+
+    def _wheel_twists(self, robots: np.ndarray) -> np.ndarray:
+        """(k, 3) the twists the forward-mode commands of ``robots`` (ascending) ask for (wheel
+        speeds and steering through the models' forward kinematics, before any limit)."""
+        st = self.state
+        out = np.zeros((len(robots), 3))
+        for g in self._groups:
+            sel = np.isin(g.idx, robots)
+            if not sel.any():
+                continue
+            rows = g.idx[sel]
+            model = g.model if sel.all() else _subset(g.model, sel)
+            w = st.cmd_wheels[rows]
+            steer = w[:, g.n_drive] if model.has_steering else np.zeros(len(w))
+            tw = model.forward(w[:, : g.n_drive], steer)
+            out[np.searchsorted(robots, rows)] = tw  # both ascending
+        return out
 
     def _actuate(self) -> np.ndarray:
         """Commands -> executed twists (N, 3); fills wheel speeds and steering in the state."""

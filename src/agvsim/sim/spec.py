@@ -14,6 +14,7 @@ from agvsim.sensors.floor_codes import FloorCameraSpec, FloorCodeGrid
 from agvsim.sensors.line_sensor import LineSensorSpec
 from agvsim.sensors.range_sensor import RangeSensorSpec
 from agvsim.sensors.reflectors import ReflectorMap
+from agvsim.sensors.safety_fields import SafetyScannerSpec
 from agvsim.world.grid import OccupancyGrid
 from agvsim.world.markers import Appearance
 from agvsim.world.tape import Tape
@@ -53,6 +54,7 @@ class RobotSpec:
     # guidance sensors (docs/guidance.md): line sensor bars and downward floor-code cameras
     line_sensors: tuple[LineSensorSpec, ...] = ()
     floor_cameras: tuple[FloorCameraSpec, ...] = ()
+    safety: SafetyScannerSpec | None = None  # a safety scanner's field sets (sim/safety.py)
 
     @property
     def footprint_half_m(self) -> tuple[float, float]:

@@ -122,6 +122,12 @@ ROBOT_ROWS = (
     "wall_collisions",
     "robot_collisions",
     "distance_m",
+    "safety_status",
+    "safety_since_s",
+    "safety_set",
+    "safety_events",
+    "safety_first_s",
+    "safety_last_s",
 )
 
 
@@ -181,6 +187,16 @@ class SimState:
     fix_seq: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (F,) fixes
     next_fix_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (F,) next frame
     intensities: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (S, B_max)
+    # safety scanners (agvsim.sim.safety; -1 / NaN / 0 for robots without one): status of the
+    # last safety stage (0 clear, 1 warning, 2 protective), when the protective violation
+    # began (NaN: none now), the active field set's index in the robot's own list, and per
+    # robot [warning, protective] violation counts, first start and last time violated
+    safety_status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))  # (N,)
+    safety_since_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,)
+    safety_set: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (N,)
+    safety_events: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    safety_first_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (N, 2)
+    safety_last_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (N, 2)
 
     @classmethod
     def zeros(
@@ -219,6 +235,12 @@ class SimState:
             cmd_wheels=np.zeros((n, w_max + 1)),
             cmd_is_twist=cmd_is_twist.copy(),
             rng=rng,
+            safety_status=np.zeros(n, dtype=np.int8),
+            safety_since_s=np.full(n, np.nan),
+            safety_set=np.full(n, -1, dtype=np.int64),
+            safety_events=np.zeros((n, 2), dtype=np.int64),
+            safety_first_s=np.full((n, 2), np.nan),
+            safety_last_s=np.full((n, 2), np.nan),
         )
 
     def copy(self) -> SimState:
