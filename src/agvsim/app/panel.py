@@ -18,6 +18,7 @@ from agvsim.app.drag_place import DragPlace
 from agvsim.app.friction_brush import paint_friction
 from agvsim.app.mask import Field, MaskError, fields_in_error, mask_fields, robot_from_mask
 from agvsim.app.session import SPEEDS, EditError, Session
+from agvsim.app.tape_brush import TapeBrush
 from agvsim.app.view import RobotView
 from agvsim.kinematics import MODELS
 from agvsim.scenario import ScenarioError
@@ -458,6 +459,16 @@ class Panel:
         self.place.on_update(
             lambda _: self._drag.show(self.selected) if self.place.value else self._drag.hide()
         )
+        self.tape = gui.add_checkbox(
+            "draw tape",
+            initial_value=False,
+            hint="click the floor to lay guidance tape: the first click starts a line, each "
+            "next one extends it (line sensors read it at once)",
+        )
+        self._tape = TapeBrush(s)
+        gui.add_button("New tape line", icon=viser.Icon.PLUS).on_click(
+            lambda _: self._world_do(self._new_tape_line)
+        )
         self.brush_mu = gui.add_number(
             "paint friction mu",
             initial_value=0.0,
@@ -496,6 +507,8 @@ class Panel:
         def _(event: Any) -> None:
             if self.place.value:
                 self._world_do(lambda: self._place_robot(event.ray_origin, event.ray_direction))
+            elif self.tape.value:
+                self._world_do(lambda: self._click_tape(event.ray_origin, event.ray_direction))
             elif self.edit.value:
                 self._world_do(lambda: self._click_cell(event.ray_origin, event.ray_direction))
 
@@ -515,6 +528,18 @@ class Panel:
         self.world_msg.content = note
         if self._drag.shown:
             self._drag.show(self.selected)
+
+    def _new_tape_line(self) -> None:
+        self._tape.new_line()
+        self.world_msg.content = "the next click starts a new tape line"
+
+    def _click_tape(self, origin: Any, direction: Any) -> None:
+        o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
+        if d[2] >= -1e-9:
+            self.world_msg.content = _error_md("that click is not on the floor")
+            return
+        t = -o[2] / d[2]
+        self.world_msg.content = self._tape.click(o[0] + t * d[0], o[1] + t * d[1])
 
     def _click_cell(self, origin: Any, direction: Any) -> None:
         cell = pick_cell(self.session, np.asarray(origin), np.asarray(direction))

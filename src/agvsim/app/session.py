@@ -375,6 +375,13 @@ class Session:
         with self.lock:
             self.set_grid(editing.random_grid(self.sim.world.grid.resolution_m, rows, cols, seed))
 
+    def set_world(self, world: dict[str, Any]) -> None:
+        """Rebuild with a new ``world:`` block (the tape brush); the robots keep their live
+        state. A world the schema refuses raises ScenarioError and changes nothing."""
+        with self.lock:
+            self._replace({**self.config, "world": world})
+            self.world_version += 1
+
     def _set_grid(self, grid: OccupancyGrid) -> None:
         self.sim.set_grid(grid)
         # the behaviours tell robots from walls with a distance field of the walls: renew it

@@ -94,7 +94,11 @@ class GuidanceRig:
             draw = rng.standard_normal((int(noisy.sum()), MAX_RUNS))
             offsets[noisy] += self.line_noise[noisy, None] * draw
         spot = spots_under(pose, self.line_mount_x, self._spot_xy, self.line_spot_r)
-        code = np.where(spot >= 0, self._spot_code[np.maximum(spot, 0)], -1)
+        code = (
+            np.where(spot >= 0, self._spot_code[np.maximum(spot, 0)], -1)
+            if len(self._spot_code)
+            else np.full(len(spot), -1, dtype=np.int64)  # a world without spots (or tape)
+        )
         if len(self._spot_code) == 0:
             code = np.full(n, -1, dtype=np.int64)
         return LineRead(active, offsets, code.astype(np.int64))
