@@ -17,6 +17,7 @@ from agvsim.sensors.floor_codes import (
 )
 
 GRID = FloorCodeGrid(cols=10, rows=4, spacing_m=1.0, size_m=0.06, origin_xy_m=(0.0, 0.0))
+QR_GRID = FloorCodeGrid(cols=10, rows=4, spacing_m=1.0, size_m=0.06, kind="qr")  # text = id
 CAM = FloorCameraSpec(width_px=160, height_px=160, m_per_px=0.001, mount_xy_m=(0.1, 0.0))
 
 
@@ -30,20 +31,23 @@ CAM = FloorCameraSpec(width_px=160, height_px=160, m_per_px=0.001, mount_xy_m=(0
         (0.01 - 0.1 * math.cos(1.0), -0.01 - 0.1 * math.sin(1.0), 1.0),
     ],
 )
-def test_a_code_in_view_gives_the_pose_within_about_a_pixel(pose):
+@pytest.mark.parametrize("kind", ["aruco", "qr"])
+def test_a_code_in_view_gives_the_pose_within_about_a_pixel(pose, kind):
+    grid = GRID if kind == "aruco" else QR_GRID
     pose = np.array(pose, dtype=np.float64)
-    img = render(CAM, GRID, pose)
-    fix = read_fix(CAM, GRID, img)
+    img = render(CAM, grid, pose)
+    fix = read_fix(CAM, grid, img)
     assert fix is not None
     cam = pose[:2] + 0.1 * np.array([math.cos(pose[2]), math.sin(pose[2])])
-    assert GRID.code_xy(fix.code_id) == (round(cam[0]), round(cam[1]))
-    assert np.hypot(*(fix.pose[:2] - pose[:2])) < 0.002  # 2 px
+    assert grid.code_xy(fix.code_id) == (round(cam[0]), round(cam[1]))
+    assert np.hypot(*(fix.pose[:2] - pose[:2])) < 0.003  # 3 px
     dth = math.remainder(fix.pose[2] - pose[2], 2 * math.pi)
     assert abs(dth) < 0.05  # the code is 60 px wide: ~1/60 rad a pixel at its corners
 
 
 def test_no_code_in_view_reads_nothing():
     assert read_fix(CAM, GRID, render(CAM, GRID, np.array([0.5, 0.5, 0.3]))) is None
+    assert read_fix(CAM, QR_GRID, render(CAM, QR_GRID, np.array([0.5, 0.5, 0.3]))) is None
     assert read_fix(CAM, GRID, render(CAM, GRID, np.array([-3.0, 0.0, 0.0]))) is None
 
 
@@ -89,3 +93,10 @@ def test_floor_code_fixes_bound_the_odometry_drift_along_a_route():
     assert fixes >= 8  # one per code passed at least
     assert err_odo[-1] > 0.15
     assert max(err_est) < 0.03  # 2 % of a metre, plus a pixel or two
+
+
+def test_codes_and_their_quiet_zone_must_fit_the_spacing():
+    with pytest.raises(ValueError, match="do not fit"):
+        FloorCodeGrid(cols=2, rows=2, spacing_m=0.08, size_m=0.06, kind="qr")
+    with pytest.raises(ValueError, match="not aruco, apriltag or qr"):
+        FloorCodeGrid(cols=2, rows=2, kind="datamatrix")

@@ -80,7 +80,7 @@ class FloorCodesConfig(StrictConfig):
     spacing_m: float = Field(1.0, gt=0, le=100)
     size_m: float = Field(0.05, gt=0, le=10)
     origin_xy_m: Point = (0.0, 0.0)
-    kind: Literal["aruco", "apriltag"] = "aruco"
+    kind: Literal["aruco", "apriltag", "qr"] = "aruco"  # qr: the text is the id
     dictionary: str = Field("4x4_1000", max_length=32)
 
 

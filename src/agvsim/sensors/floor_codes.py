@@ -48,6 +48,16 @@ class FloorCodeGrid:
                 f"floor codes: need 0 < size_m < spacing_m, got {self.size_m} and {self.spacing_m}"
             )
         n = self.cols * self.rows
+        if self.kind not in ("aruco", "apriltag", "qr"):
+            raise ValueError(f"floor codes: kind {self.kind!r} is not aruco, apriltag or qr")
+        gap = self.size_m + 2.0 * self.quiet_modules * self.size_m / self.modules.shape[1]
+        if gap >= self.spacing_m:
+            raise ValueError(
+                f"floor codes: codes {self.size_m} m wide with their quiet zone ({gap:.3f} m) "
+                f"do not fit the {self.spacing_m} m spacing"
+            )
+        if self.kind == "qr":
+            return  # a QR code's text is its id: any number
         have = int(self._dict.bytesList.shape[0])
         if n > have:
             raise ValueError(
@@ -59,11 +69,28 @@ class FloorCodeGrid:
     def _dict(self):  # noqa: ANN202 - OpenCV's type
         return aruco_dictionary(self.kind, self.dictionary)
 
+    @property
+    def quiet_modules(self) -> int:
+        """The white margin around each code, in modules (ISO 18004 asks 4 for QR)."""
+        return 4 if self.kind == "qr" else 1
+
     @cached_property
     def modules(self) -> np.ndarray:
-        """(n_codes, m, m) uint8 module images (black border included, no quiet zone)."""
+        """(n_codes, m, m) uint8 module images (black border included, no quiet zone); a QR
+        code holds its id as text."""
         import cv2
 
+        if self.kind == "qr":
+            enc = cv2.QRCodeEncoder.create()
+            codes = []
+            for k in range(self.cols * self.rows):
+                img = np.asarray(enc.encode(str(k)))
+                dark = np.argwhere(img < 128)
+                (r0, c0), (r1, c1) = dark.min(axis=0), dark.max(axis=0)
+                codes.append(img[r0 : r1 + 1, c0 : c1 + 1])
+            if len({c.shape for c in codes}) != 1:  # pragma: no cover - short ids: version 1
+                raise ValueError("floor codes: the QR codes differ in size")
+            return np.stack(codes)
         side = int(self._dict.markerSize) + 2
         return np.stack(
             [
@@ -91,7 +118,8 @@ class FloorCodeGrid:
         module_m = self.size_m / m
         half = self.size_m / 2.0
         on_grid = (c >= 0) & (c < self.cols) & (r >= 0) & (r < self.rows)
-        quiet = on_grid & (np.abs(du) <= half + module_m) & (np.abs(dv) <= half + module_m)
+        q = half + self.quiet_modules * module_m
+        quiet = on_grid & (np.abs(du) <= q) & (np.abs(dv) <= q)
         inside = on_grid & (np.abs(du) < half) & (np.abs(dv) < half)
         out = np.where(quiet, WHITE, FLOOR_GREY).astype(np.uint8)
         if inside.any():
@@ -157,19 +185,20 @@ class FloorFixReading:
 
 
 def read_fix(spec: FloorCameraSpec, grid: FloorCodeGrid, image: np.ndarray) -> CodeFix | None:
-    """Decode the image (OpenCV ArUco detector); from the first whole code with an id on the
-    grid, the robot's pose. None when no code is read."""
+    """Decode the image (OpenCV's ArUco or QR detector); from the first whole code with an id
+    on the grid, the robot's pose. None when no code is read."""
     import cv2
 
-    detector = cv2.aruco.ArucoDetector(grid._dict, cv2.aruco.DetectorParameters())
-    corners, ids, _ = detector.detectMarkers(image)
-    if ids is None:
-        return None
-    for quad, code in zip(corners, ids.ravel(), strict=True):
-        k = int(code)
+    if grid.kind == "qr":
+        text, points, _ = cv2.QRCodeDetector().detectAndDecode(image)
+        if not text or points is None or not text.isdigit():
+            return None
+        found = [(np.asarray(points, dtype=np.float64).reshape(4, 2), int(text))]
+    else:
+        found = _aruco_codes(grid, image)
+    for px, k in found:
         if not 0 <= k < grid.cols * grid.rows:
             continue
-        px = np.asarray(quad, dtype=np.float64).reshape(4, 2)
         robot = spec.pixel_to_robot(px[:, 0], px[:, 1])
         cx, cy = grid.code_xy(k)
         h = grid.size_m / 2.0
@@ -177,6 +206,19 @@ def read_fix(spec: FloorCameraSpec, grid: FloorCodeGrid, image: np.ndarray) -> C
         world = np.array([[cx - h, cy + h], [cx + h, cy + h], [cx + h, cy - h], [cx - h, cy - h]])
         return CodeFix(k, _rigid_fit(robot, world), px)
     return None
+
+
+def _aruco_codes(grid: FloorCodeGrid, image: np.ndarray) -> list[tuple[np.ndarray, int]]:
+    import cv2
+
+    detector = cv2.aruco.ArucoDetector(grid._dict, cv2.aruco.DetectorParameters())
+    corners, ids, _ = detector.detectMarkers(image)
+    if ids is None:
+        return []
+    return [
+        (np.asarray(quad, dtype=np.float64).reshape(4, 2), int(code))
+        for quad, code in zip(corners, ids.ravel(), strict=True)
+    ]
 
 
 def _rigid_fit(a: np.ndarray, b: np.ndarray) -> np.ndarray:
