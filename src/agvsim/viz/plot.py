@@ -20,6 +20,7 @@ def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = 
     xmin, xmax, ymin, ymax = sim.world.grid.extent_m
     for b in sim.world.boxes:
         ax.add_patch(Polygon(_corners(b), closed=True, color="0.35"))
+    _draw_guidance(ax, sim.world)
     st = sim.state
     fps = sim.footprints(st.poses)
     for i, robot in enumerate(sim.robots):
@@ -57,6 +58,25 @@ def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = 
     if sim.robots:
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     save_figure(fig, path, bbox_inches="tight")
+
+
+def _draw_guidance(ax: Axes, world) -> None:
+    """Tape (with its spots), floor codes and reflectors, where the world has them."""
+    tape = getattr(world, "tape", None)
+    if tape is not None and len(tape.segments):
+        from matplotlib.collections import LineCollection
+
+        segs = tape.segments.reshape(-1, 2, 2)
+        ax.add_collection(LineCollection(segs, colors="tab:blue", linewidths=1.5, alpha=0.6))
+        if len(tape.spot_xy):
+            ax.plot(*tape.spot_xy.T, "o", color="tab:red", ms=4, label="tape spots")
+    codes = getattr(world, "floor_codes", None)
+    if codes is not None:
+        xy = np.array([codes.code_xy(k) for k in range(codes.cols * codes.rows)])
+        ax.plot(*xy.T, "s", color="k", ms=2, label="floor codes")
+    refl = getattr(world, "reflectors", None)
+    if refl is not None and len(refl.xy):
+        ax.plot(*refl.xy.T, "D", color="gold", mec="k", ms=5, label="reflectors")
 
 
 def map_figure(grid, width_in: float, dpi: int, wall_vmax: float) -> tuple[Figure, Axes]:
