@@ -192,6 +192,71 @@ BASES: list[dict[str, Any]] = [
     },
 ]
 
+BASES.append(  # the guidance and safety blocks (issue 18): tape, codes, reflectors, a scanner
+    {
+        "name": "guidance and safety",
+        "duration_s": 2.0,
+        "world": {
+            "matrix": [
+                [1, 1, 1, 1, 1, 1],
+                [1, 0, 0, 0, 0, 1],
+                [1, 0, 0, 0, 0, 1],
+                [1, 1, 1, 1, 1, 1],
+            ],
+            "cell_size_m": 2.0,
+            "origin_xy_m": [0.0, 0.0],
+            "tape": {
+                "width_m": 0.05,
+                "lines": [
+                    {"points": [[2.5, 3.0], [6.0, 3.0]]},
+                    {
+                        "arc": {
+                            "center": [6.0, 4.0],
+                            "radius_m": 1.0,
+                            "start_deg": -90,
+                            "sweep_deg": 90,
+                        }
+                    },
+                ],
+                "spots": [{"x_m": 4.0, "y_m": 3.0, "code": 3}],
+            },
+            "floor_codes": {
+                "cols": 3,
+                "rows": 2,
+                "spacing_m": 1.0,
+                "size_m": 0.05,
+                "origin_xy_m": [3.0, 3.0],
+            },
+            "reflectors": {"width_m": 0.08, "points": [[2.0, 2.5], [10.0, 4.0], [6.0, 6.0]]},
+        },
+        "robots": [
+            {
+                "name": "agv",
+                "model": "differential",
+                "params": {"max_wheel_speed_rad_s": 5.0},
+                "pose": {"x_m": 2.8, "y_m": 3.0},
+                "body": {"length_m": 0.5, "width_m": 0.4},
+                "sensors": [
+                    {"type": "lidar", "beams": 36, "range_max_m": 8.0},
+                    {"type": "line", "elements": 8, "span_m": 0.1, "mount_x_m": 0.25},
+                    {"type": "floor_camera", "width_px": 32, "height_px": 32},
+                ],
+                "safety": {
+                    "sensor": "lidar",
+                    "field_sets": [
+                        {
+                            "name": "all",
+                            "protective": [[-0.6, -0.3], [1.6, -0.3], [1.6, 0.3], [-0.6, 0.3]],
+                            "warning": [[-0.6, -0.5], [2.5, -0.5], [2.5, 0.5], [-0.6, 0.5]],
+                        },
+                    ],
+                },
+                "controller": {"type": "line_follow", "speed_m_s": 0.4},
+            }
+        ],
+    }
+)
+
 NASTY: list[Any] = [
     math.nan, math.inf, -math.inf, 1e40, -1e300, 1e-300, 10**40, 10**400, -(2**63) - 1, 2**64,
     -5, 0, 0.0,
