@@ -28,20 +28,15 @@ from dataclasses import dataclass, field
 import numba as nb
 import numpy as np
 
+from agvsim.world.points import xy_points
+
 CLEAR, WARNING, PROTECTIVE = 0, 1, 2
 STATUS_NAMES = ("clear", "warning", "protective")
 
 
 def _polygon(points: Sequence[Sequence[float]], where: str) -> np.ndarray:
     """An (n, 2) float array checked to be a simple polygon with n >= 3 and a non-zero area."""
-    try:
-        p = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: a polygon is a list of [x_m, y_m] points") from None
-    if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3:
-        raise ValueError(f"{where}: a polygon needs at least 3 [x_m, y_m] points, got {p.shape}")
-    if not np.isfinite(p).all():
-        raise ValueError(f"{where}: polygon points must be finite numbers")
+    p = xy_points(points, where, 3)
     n = len(p)
     for i in range(n):
         for j in range(i + 1, n):

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agvsim.world.points import xy_points
+
 
 @dataclass(frozen=True)
 class Arc:
@@ -58,7 +60,11 @@ class Tape:
             raise ValueError(f"tape width_m must be in (0, 1] m, got {width_m}")
         segs: list[np.ndarray] = []
         for k, line in enumerate(lines):
-            pts = line.points(chord_error_m) if isinstance(line, Arc) else _polyline(line, k)
+            pts = (
+                line.points(chord_error_m)
+                if isinstance(line, Arc)
+                else xy_points(line, f"tape line {k}", 2)
+            )
             segs.append(np.column_stack([pts[:-1], pts[1:]]))
         self.segments = np.concatenate(segs) if segs else np.zeros((0, 4))
         self.width_m = float(width_m)
@@ -83,15 +89,3 @@ class Tape:
         t = np.clip(((q - a) * ab).sum(-1) / den, 0.0, 1.0)
         d = q - (a + t[..., None] * ab)
         return np.sqrt((d * d).sum(-1)).min(axis=-1)
-
-
-def _polyline(line: Sequence[Sequence[float]], k: int) -> np.ndarray:
-    try:
-        pts = np.asarray(line, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"tape line {k}: a list of [x_m, y_m] points") from None
-    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
-        raise ValueError(f"tape line {k}: needs at least 2 [x_m, y_m] points, got {pts.shape}")
-    if not np.isfinite(pts).all():
-        raise ValueError(f"tape line {k}: points must be finite numbers")
-    return pts
