@@ -245,30 +245,41 @@ def test_run_mcap_carries_intensities_the_estimate_and_the_line_reading(tmp_path
                  plot=False)  # fmt: skip
     run_scenario(SCENARIOS / "guidance_tape.yaml", tmp_path / "t", duration_s=1.0, plot=False)
     rec = Recording(tmp_path / "r" / "run.mcap")
-    if True:
-        scans = rec.messages("/agv/lidar")
-        assert len(scans) == 11  # 10 Hz over 1 s, and t = 0
-        for _, m in scans:
-            inten = np.asarray(m.intensities)
-            assert inten.shape == (1080,)
-            assert (inten == REFLECTOR_INTENSITY).sum() >= 10
-        est = rec.messages("/agv/localization")
-        truth = rec.messages("/agv/ground_truth")
-        assert len(est) == 50 and len(truth) == 51  # the estimate: from the first step on
-        # the estimate of each observation's time follows the truth there within the
-        # filter's accuracy
-        at = {round(t, 6): m for t, m in truth}
-        assert [round(t, 6) for t, _ in est] == sorted(at)[:50]
-        for t, e in est:
-            pe, pg = e.pose.pose.position, at[round(t, 6)].pose.pose.position
-            assert math.hypot(pe.x - pg.x, pe.y - pg.y) < 0.03
+    scans = rec.messages("/agv/lidar")
+    assert len(scans) == 11  # 10 Hz over 1 s, and t = 0
+    for _, m in scans:
+        inten = np.asarray(m.intensities)
+        assert inten.shape == (1080,)
+        assert (inten == REFLECTOR_INTENSITY).sum() >= 10
+    est = rec.messages("/agv/localization")
+    truth = rec.messages("/agv/ground_truth")
+    assert len(est) == 50 and len(truth) == 51  # the estimate: from the first step on
+    # the estimate of each observation's time follows the truth there within the
+    # filter's accuracy
+    at = {round(t, 6): m for t, m in truth}
+    assert [round(t, 6) for t, _ in est] == sorted(at)[:50]
+    for t, e in est:
+        pe, pg = e.pose.pose.position, at[round(t, 6)].pose.pose.position
+        assert math.hypot(pe.x - pg.x, pe.y - pg.y) < 0.03
     rec = Recording(tmp_path / "t" / "run.mcap")
-    if True:
-        lines = rec.messages("/agv/line")
-        assert len(lines) == 51
-        # the robot starts on the tape: one run, near the bar's middle
-        assert all(len(m.data) == 1 and abs(m.data[0]) < 0.02 for _, m in lines)
-        assert "/agv/localization" not in rec.topics
+    lines = rec.messages("/agv/line")
+    assert len(lines) == 51
+    # the robot starts on the tape: one run, near the bar's middle
+    assert all(len(m.data) == 1 and abs(m.data[0]) < 0.02 for _, m in lines)
+    assert "/agv/localization" not in rec.topics
+    # every message of both files, the new topics included, decodes with the independent
+    # ROS 2 decoder (mcap-ros2-support) against the ROS 2 message definition it names
+    import mcap_ros2.decoder
+    from mcap.reader import make_reader
+
+    names = {}
+    for run in ("r", "t"):
+        with (tmp_path / run / "run.mcap").open("rb") as f:
+            reader = make_reader(f, decoder_factories=[mcap_ros2.decoder.DecoderFactory()])
+            names[run] = {ch.topic: sc.name for sc, ch, _, _ in reader.iter_decoded_messages()}
+    assert names["r"]["/agv/lidar"] == "sensor_msgs/msg/LaserScan"
+    assert names["r"]["/agv/localization"] == "nav_msgs/msg/Odometry"
+    assert names["t"]["/agv/line"] == "std_msgs/msg/Float64MultiArray"
 
 
 def test_the_3d_view_draws_tape_codes_and_reflectors_where_the_world_has_them():
