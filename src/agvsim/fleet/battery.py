@@ -2,19 +2,58 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import numpy as np
 
 
-@dataclass
 class Battery:
     """``charge_pct`` in [0, 100]. Per second: -idle_pct_s, -drive_pct_m per metre driven,
-    +charge_pct_s while charging (and only then)."""
+    +charge_pct_s while charging (and only then).
 
-    charge_pct: float = 80.0
-    idle_pct_s: float = 0.002
-    drive_pct_m: float = 0.05
-    charge_pct_s: float = 0.5
-    charging: bool = False
+    The charge and the two drain rates live in one-element views (``bind``): a fleet keeps
+    them in its ``VehicleBank`` rows, where the batch tick drains them too."""
+
+    def __init__(
+        self,
+        charge_pct: float = 80.0,
+        idle_pct_s: float = 0.002,
+        drive_pct_m: float = 0.05,
+        charge_pct_s: float = 0.5,
+        charging: bool = False,
+    ):
+        self._charge = np.array([float(charge_pct)])
+        self._idle = np.array([float(idle_pct_s)])
+        self._drive = np.array([float(drive_pct_m)])
+        self.charge_pct_s = charge_pct_s
+        self.charging = charging
+
+    def bind(self, charge: np.ndarray, idle: np.ndarray, drive: np.ndarray) -> None:
+        """Keep the charge and the drain rates in these (1,) views from now on."""
+        charge[0], idle[0], drive[0] = self._charge[0], self._idle[0], self._drive[0]
+        self._charge, self._idle, self._drive = charge, idle, drive
+
+    @property
+    def charge_pct(self) -> float:
+        return float(self._charge[0])
+
+    @charge_pct.setter
+    def charge_pct(self, value: float) -> None:
+        self._charge[0] = value
+
+    @property
+    def idle_pct_s(self) -> float:
+        return float(self._idle[0])
+
+    @idle_pct_s.setter
+    def idle_pct_s(self, value: float) -> None:
+        self._idle[0] = value
+
+    @property
+    def drive_pct_m(self) -> float:
+        return float(self._drive[0])
+
+    @drive_pct_m.setter
+    def drive_pct_m(self, value: float) -> None:
+        self._drive[0] = value
 
     def update(self, dt_s: float, distance_m: float) -> None:
         if self.charging:

@@ -30,7 +30,7 @@ TOPICS_OUT = ("state", "visualization", "connection", "factsheet")
 def iso_time(epoch: datetime, t_s: float) -> str:
     """ISO 8601 UTC with milliseconds, e.g. 2026-11-25T07:40:03.120Z."""
     t = epoch + timedelta(seconds=round(t_s, 3))
-    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
+    return t.replace(tzinfo=None).isoformat(timespec="milliseconds") + "Z"
 
 
 @dataclass
@@ -89,15 +89,15 @@ def state(v: Vehicle) -> dict:
     ok = v.dialect.has_paused_status
     order_states = [action_state(a, v3, ok) for a in v.order_actions.values()]
     instant_states = [action_state(a, v3, ok) for a in v.instant_actions]
-    released_left = sum(n.released for n in v.route_nodes)
+    node_states, released_left = v.node_states()
     last = v.last_node
     out: dict[str, Any] = v.stamp.header("state", v.t_s) | {
         "orderId": v.order_id,
         "orderUpdateId": v.update_id,
         "lastNodeId": "" if last is None else last.node_id,
         "lastNodeSequenceId": 0 if last is None else last.seq,
-        "nodeStates": [n.state_json() for n in v.route_nodes],
-        "edgeStates": [e.state_json() for e in v.route_edges],
+        "nodeStates": node_states,
+        "edgeStates": v.edge_states(),
         "driving": v.driving,
         "paused": v.paused,
         "newBaseRequest": released_left <= 1 and len(v.route_nodes) > released_left,

@@ -3,29 +3,29 @@
 A ``Leg`` is the stretch from the node the vehicle stands on to the next node it must stop at
 (the end of the base, or a node whose actions forbid driving): the edges' NURBS trajectories
 (sampled) or straight lines, joined into one polyline. It is followed by pure pursuit, with the
-steering law every behaviour shares (``agvsim.control.mobility.pursuit_twist``: holonomic models
-translate, models that turn on the spot turn, car-like ones clip the curvature to their lock)
-and the progress rules of ``agvsim.control.pure_pursuit.PurePursuit`` (monotone arc-length
-progress searched in a window ahead, a carrot ``lookahead_m`` further on, slowing down over the
-last lookahead to stop within the tolerance). The progress is tracked here in plain Python:
-legs have a handful of segments, and per-call NumPy overhead on such tiny arrays cost more than
-the arithmetic, for each of a thousand vehicles every step. Each node keeps its arc length
+steering law every behaviour shares (``agvsim.control.mobility.pursuit_twist``, whose numba twin
+``agvsim.fleet.bank.pursuit`` is used here: holonomic models translate, models that turn on the
+spot turn, car-like ones clip the curvature to their lock) and the progress rules of
+``agvsim.control.pure_pursuit.PurePursuit`` (monotone arc-length progress searched in a window
+ahead, a carrot ``lookahead_m`` further on, slowing down over the last lookahead to stop within
+the tolerance). The geometry and the progress live in a ``VehicleBank`` row (``attach``), where
+the fleet's batch tick follows the leg for every quiet vehicle at once and ``twist`` follows it
+for one, with the same kernel (``agvsim.fleet.bank.follow``). Each node keeps its arc length
 along the leg, so passing it is a comparison with the progress.
 """
 
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
 from collections.abc import Sequence
 
 import numpy as np
 
-from agvsim.control.mobility import Mobility, pursuit_twist
+from agvsim.control.mobility import Mobility
+from agvsim.fleet.bank import VehicleBank, follow
 from agvsim.fleet.order import OrderEdge, OrderNode
 
 NURBS_SAMPLES = 32
-MAX_TURN_RATE_RAD_S = 1.5
 
 
 def edge_points(edge: OrderEdge, b: OrderNode) -> list[tuple[float, float]]:
@@ -56,9 +56,44 @@ class Leg:
         self._where: dict[int, int] = {id(nodes[0]): 0}  # id(node) -> index (nodes live on)
         self.pts: list[tuple[float, float]] = [nodes[0].xy]
         self.cum: list[float] = [0.0]
-        self.s = 0.0
-        self.reached = False
+        self._bank: VehicleBank | None = None
+        self._slot = 0
+        self._s = 0.0
+        self._reached = False
         self.extend(nodes, edges, speeds, tolerance_m)
+
+    def attach(self, bank: VehicleBank, slot: int) -> None:
+        """Put the leg into row ``slot`` of ``bank`` (its progress lives there from now on);
+        again after an extension, to re-read the geometry."""
+        s, reached = self.s, self.reached
+        bank.set_leg(
+            slot, self.pts, self.cum, self.node_s, self.speeds, self.lookahead_m, self.tolerance_m
+        )
+        self._bank, self._slot = bank, slot
+        self.s, self.reached = s, reached
+
+    @property
+    def s(self) -> float:
+        """Progress along the leg (m)."""
+        return self._s if self._bank is None else float(self._bank.s[self._slot])
+
+    @s.setter
+    def s(self, value: float) -> None:
+        if self._bank is None:
+            self._s = value
+        else:
+            self._bank.s[self._slot] = value
+
+    @property
+    def reached(self) -> bool:
+        return self._reached if self._bank is None else bool(self._bank.reached[self._slot])
+
+    @reached.setter
+    def reached(self, value: bool) -> None:
+        if self._bank is None:
+            self._reached = value
+        else:
+            self._bank.reached[self._slot] = value
 
     def extend(
         self,
@@ -81,6 +116,8 @@ class Leg:
             self.speeds.append(v)
         self.tolerance_m = tolerance_m
         self.reached = len(self.pts) < 2
+        if self._bank is not None:  # the bank's copy of the geometry follows
+            self.attach(self._bank, self._slot)
 
     @property
     def node_ids(self) -> list[str]:
@@ -94,60 +131,41 @@ class Leg:
     def length_m(self) -> float:
         return self.cum[-1]
 
-    def speed_here(self) -> float:
-        k = bisect_right(self.node_s, self.s) - 1
-        return self.speeds[min(max(k, 0), len(self.speeds) - 1)] if self.speeds else 0.0
-
-    def point_at(self, s: float) -> tuple[tuple[float, float], float]:
-        """Point and tangent heading at arc length ``s`` (clamped to the leg)."""
-        s = min(max(s, 0.0), self.cum[-1])
-        i = min(max(bisect_right(self.cum, s) - 1, 0), len(self.pts) - 2)
-        (ax, ay), (bx, by) = self.pts[i], self.pts[i + 1]
-        ln = self.cum[i + 1] - self.cum[i]
-        t = 0.0 if ln <= 0 else (s - self.cum[i]) / ln
-        return (ax + t * (bx - ax), ay + t * (by - ay)), math.atan2(by - ay, bx - ax)
-
-    def project(self, x: float, y: float, window_m: float) -> None:
-        """Advance the progress to the closest path point within ``window_m`` ahead."""
-        s0, cum, pts = self.s, self.cum, self.pts
-        best, best_d = s0, math.inf
-        i = max(bisect_right(cum, s0) - 1, 0)
-        while i < len(pts) - 1 and cum[i] <= s0 + window_m:
-            (ax, ay), (bx, by) = pts[i], pts[i + 1]
-            dx, dy = bx - ax, by - ay
-            ln2 = dx * dx + dy * dy
-            t = min(max(((x - ax) * dx + (y - ay) * dy) / ln2, 0.0), 1.0)
-            d = math.hypot(ax + t * dx - x, ay + t * dy - y)
-            if d < best_d:
-                best, best_d = cum[i] + t * (cum[i + 1] - cum[i]), d
-            i += 1
-        self.s = max(best, s0)
-
     def twist(self, pose: np.ndarray, mob: Mobility) -> tuple[float, float, float]:
+        """The body twist to follow the leg from ``pose``; advances the progress and sets
+        ``reached`` within the tolerance of the end (``agvsim.fleet.bank.follow``)."""
         if self.reached:
             return 0.0, 0.0, 0.0
-        x, y = float(pose[0]), float(pose[1])
-        ld = max(self.lookahead_m, 1.2 * mob.min_radius_m)
-        self.project(x, y, ld + 0.5)
-        end = self.pts[-1]
-        to_end = math.hypot(end[0] - x, end[1] - y)
-        remaining = self.cum[-1] - self.s
-        if remaining < ld and to_end < self.tolerance_m:
-            self.reached = True
-            return 0.0, 0.0, 0.0
-        target, heading = self.point_at(self.s + ld)
-        speed = self.speed_here()
-        if remaining < ld:
-            target = end
-            speed = min(speed, max(0.1, to_end) * speed)
-        return pursuit_twist(
-            pose,
-            np.asarray(target),
-            speed,
-            mob,
-            travel_heading_rad=heading,
-            max_turn_rate_rad_s=MAX_TURN_RATE_RAD_S,
+        if self._bank is None:
+            self.attach(VehicleBank(1, points=len(self.pts)), 0)
+        b, k = self._bank, self._slot
+        assert b is not None
+        s, vx, vy, w, done = follow(
+            float(pose[0]),
+            float(pose[1]),
+            float(pose[2]),
+            float(b.s[k]),
+            int(b.pstart[k]),
+            int(b.npts[k]),
+            b.px,
+            b.py,
+            b.cum,
+            int(b.nstart[k]),
+            int(b.nnodes[k]),
+            b.node_s,
+            b.speed,
+            self.lookahead_m,
+            self.tolerance_m,
+            mob.holonomic,
+            mob.can_spin,
+            mob.max_curvature_1_m,
+            mob.min_radius_m,
         )
+        b.s[k] = s
+        if done:
+            b.reached[k] = True
+            return 0.0, 0.0, 0.0
+        return vx, vy, w
 
     def ahead(self, length_m: float, step_m: float = 0.05) -> np.ndarray:
         """(M, 2) path points from the current progress to ``length_m`` further on."""

@@ -58,15 +58,22 @@ class OrderNode:
     dev_theta_rad: float
     map_id: str
     actions: list[Action] = field(default_factory=list)
+    _json: dict | None = field(default=None, init=False, repr=False, compare=False)
 
     def state_json(self) -> dict:
-        return {
-            "nodeId": self.node_id,
-            "sequenceId": self.seq,
-            "released": self.released,
-            "nodePosition": {"x": self.xy[0], "y": self.xy[1], "mapId": self.map_id}
-            | ({} if self.theta is None else {"theta": self.theta}),
-        }
+        """Its entry in ``state.nodeStates``: built once (a node of an order never changes;
+        an update brings new node objects), shared by every state message - read only."""
+        if self._json is None:
+            pos = {"x": self.xy[0], "y": self.xy[1], "mapId": self.map_id}
+            if self.theta is not None:
+                pos["theta"] = self.theta
+            self._json = {
+                "nodeId": self.node_id,
+                "sequenceId": self.seq,
+                "released": self.released,
+                "nodePosition": pos,
+            }
+        return self._json
 
 
 @dataclass
@@ -79,9 +86,13 @@ class OrderEdge:
     max_speed_m_s: float | None
     trajectory: Nurbs | None
     actions: list[Action] = field(default_factory=list)
+    _json: dict | None = field(default=None, init=False, repr=False, compare=False)
 
     def state_json(self) -> dict:
-        return {"edgeId": self.edge_id, "sequenceId": self.seq, "released": self.released}
+        """Its entry in ``state.edgeStates`` (built once, shared, read only)."""
+        if self._json is None:
+            self._json = {"edgeId": self.edge_id, "sequenceId": self.seq, "released": self.released}
+        return self._json
 
 
 @dataclass(frozen=True)

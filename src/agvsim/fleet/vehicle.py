@@ -26,6 +26,7 @@ import numpy as np
 from agvsim.control.mobility import Mobility, wrap
 from agvsim.fleet import messages, safety
 from agvsim.fleet.actions import ACTION_TYPES, ENDED, drive_blocked, schedule, supported_scopes
+from agvsim.fleet.bank import VehicleBank
 from agvsim.fleet.battery import Battery
 from agvsim.fleet.dialect import V2, Dialect, Problem
 from agvsim.fleet.intake import decode
@@ -39,6 +40,12 @@ MAX_ERRORS = 20
 MIN_TOLERANCE_M = 0.05  # a stop node is reached within max(this, allowedDeviationXY)
 MIN_TOLERANCE_RAD = 0.02
 MAX_INSTANT_STATES = 50
+# a vehicle's own values in a VehicleBank row (copied by ``Vehicle.bind``)
+ROW = (
+    "t_s pose twist dist_node_m next_control_s period_s next_wake_s quiet driving "
+    "look_m tol_m next_node_s holonomic can_spin kmax min_r_m use_field front_m reaction_s "
+    "decel_m_s2 margin_m half_width_m mount_m"
+).split()
 
 
 def _reach(node: OrderNode) -> float:
@@ -107,12 +114,24 @@ class Vehicle:
         self._fields = (
             None if spec.safety is None or lidar is None else PackedFields.of([spec.safety])
         )
+        # the hot values live in a bank row: this vehicle's own until a fleet binds it
+        self._b, self._k = VehicleBank(1, points=8), 0
+        self.battery.bind(
+            self._b.charge_pct[0:1], self._b.idle_pct_s[0:1], self._b.drive_pct_m[0:1]
+        )
+        self._init_row()
         self.inbox: deque[tuple[str, Any]] = deque()
         self.outbox: list[tuple[str, dict, bool]] = []
         # protocol state
         self.order_id, self.update_id, self.cancelled = "", 0, False
         self.route_nodes: list[OrderNode] = []  # not yet traversed (nodeStates)
         self.route_edges: list[OrderEdge] = []  # not yet left (edgeStates)
+        # node/edge state entries per route list (``node_states``)
+        self._ns_src: list[OrderNode] | None = None
+        self._ns_json: list[dict] = []
+        self._ns_released = 0
+        self._es_src: list[OrderEdge] | None = None
+        self._es_json: list[dict] = []
         self.last_node: OrderNode | None = None
         self.order_actions: dict[str, Action] = {}
         self.instant_actions: list[Action] = []
@@ -123,7 +142,7 @@ class Vehicle:
         self.loads: list[dict] = []
         self.paused = self.driving = self.field_violation = False
         self.broken = False  # a scheduled breakdown (``break_down``): stopped for good
-        self.twist: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.twist = (0.0, 0.0, 0.0)
         self.pose = np.array(spec.initial_pose, dtype=np.float64)
         self.t_s = 0.0
         self.distance_since_node_m = 0.0
@@ -134,6 +153,120 @@ class Vehicle:
         if start_node is not None:
             xy = self.layout.node_xy(start_node) if self.layout else tuple(self.pose[:2])
             self.last_node = OrderNode(start_node, 0, True, xy, None, 0.1, 0.1, cfg.map_id)
+
+    # ------------------------------------------------------------------ the bank row
+    def _init_row(self) -> None:
+        b, k, c, m = self._b, self._k, self.cfg, self.mob
+        b.period_s[k] = c.control_period_s
+        b.holonomic[k], b.can_spin[k] = m.holonomic, m.can_spin
+        b.kmax[k], b.min_r_m[k] = m.max_curvature_1_m, m.min_radius_m
+        b.use_field[k] = self.lidar is not None and self._fields is None
+        b.front_m[k], b.reaction_s[k], b.decel_m_s2[k] = self._front_m, c.reaction_s, c.decel_m_s2
+        b.margin_m[k], b.half_width_m[k] = c.field_margin_m, self._half_width_m
+        b.mount_m[k] = self._mount_m
+
+    def bind(self, bank: VehicleBank, k: int) -> None:
+        """Move this vehicle's hot values into row ``k`` of ``bank`` (a fleet's shared one)."""
+        old, j = self._b, self._k
+        for name in ROW:
+            getattr(bank, name)[k] = getattr(old, name)[j]
+        self._b, self._k = bank, k
+        self.battery.bind(
+            bank.charge_pct[k : k + 1], bank.idle_pct_s[k : k + 1], bank.drive_pct_m[k : k + 1]
+        )
+        if self.leg is not None:
+            self.leg.attach(bank, k)
+
+    @property
+    def t_s(self) -> float:
+        """Time of the last control tick (s)."""
+        return float(self._b.t_s[self._k])
+
+    @t_s.setter
+    def t_s(self, value: float) -> None:
+        self._b.t_s[self._k] = value
+
+    @property
+    def pose(self) -> np.ndarray:
+        """(3,) pose at the last control tick (a copy)."""
+        return self._b.pose[self._k].copy()
+
+    @pose.setter
+    def pose(self, value: np.ndarray) -> None:
+        self._b.pose[self._k] = value
+
+    @property
+    def twist(self) -> tuple[float, float, float]:
+        """The body twist commanded (vx, vy m/s, omega rad/s), held between ticks."""
+        vx, vy, w = self._b.twist[self._k].tolist()
+        return vx, vy, w
+
+    @twist.setter
+    def twist(self, value: tuple[float, float, float]) -> None:
+        self._b.twist[self._k] = value
+
+    @property
+    def distance_since_node_m(self) -> float:
+        return float(self._b.dist_node_m[self._k])
+
+    @distance_since_node_m.setter
+    def distance_since_node_m(self, value: float) -> None:
+        self._b.dist_node_m[self._k] = value
+
+    @property
+    def _next_control_s(self) -> float:
+        return float(self._b.next_control_s[self._k])
+
+    @_next_control_s.setter
+    def _next_control_s(self, value: float) -> None:
+        self._b.next_control_s[self._k] = value
+
+    def _quiet(self) -> bool:
+        """Whether a control tick would only follow the leg (or stand): nothing to handle,
+        run, publish or check beyond what ``agvsim.fleet.bank.tick`` does."""
+        if (
+            self.inbox
+            or self.paused
+            or self.broken
+            or self.battery.charging
+            or self.field_violation
+            or self._fields is not None
+            or self._dirty
+            or self._want_factsheet
+            or self.errors
+            and any(e[0] == "run" for e in self.errors)
+            or any(a.status not in ENDED for a in self.here)
+            or self._running()
+        ):
+            return False
+        edges = self.route_edges
+        if not edges or not edges[0].released or self.last_node is None:
+            return True  # standing: nothing to drive
+        return (
+            self.leg is not None
+            and self.on_edge
+            and all(a.status in ENDED for a in edges[0].actions)
+        )
+
+    def _settle(self) -> None:
+        """After Python handled the vehicle: tell the bank what the batch tick may do."""
+        b, k, leg = self._b, self._k, self.leg
+        if leg is None:
+            b.has_leg[k] = False
+        elif leg._bank is not b:
+            leg.attach(b, k)
+        nxt = math.inf
+        if leg is not None and self.route_nodes:
+            i = leg.index(self.route_nodes[0])
+            if i is not None and i < len(leg.nodes) - 1:
+                nxt = leg.node_s[i]
+        b.next_node_s[k] = nxt
+        c = self.cfg
+        b.next_wake_s[k] = min(
+            self._next_state_s, self._next_vis_s if c.vis_period_s > 0 else math.inf
+        )
+        b.driving[k] = self.driving
+        b.quiet[k] = self._quiet()
 
     # ------------------------------------------------------------------ the public surface
     def receive(self, topic: str, payload: Any) -> None:
@@ -174,7 +307,29 @@ class Vehicle:
             self.driving, self._dirty = driving, True
         self.twist = tw
         self._publish_due()
+        self._settle()
         return tw
+
+    def node_states(self) -> tuple[list[dict], int]:
+        """``state.nodeStates`` and how many of those nodes are released. The route only
+        loses nodes at its front (passed) or is replaced whole (an order or update), and
+        released nodes come first: so the entries are built once per route (a new list) and
+        each state takes the remaining tail."""
+        nodes = self.route_nodes
+        if self._ns_src is not nodes:
+            self._ns_src = nodes
+            self._ns_json = [n.state_json() for n in nodes]
+            self._ns_released = sum(n.released for n in nodes)
+        gone = len(self._ns_json) - len(nodes)
+        return self._ns_json[gone:], max(0, self._ns_released - gone)
+
+    def edge_states(self) -> list[dict]:
+        """``state.edgeStates``, as ``node_states`` (edges leave the route at its front)."""
+        edges = self.route_edges
+        if self._es_src is not edges:
+            self._es_src = edges
+            self._es_json = [e.state_json() for e in edges]
+        return self._es_json[len(self._es_json) - len(edges) :]
 
     def connection(self, state: str) -> dict:
         return messages.connection(self.stamp, self.t_s, state)
@@ -207,6 +362,7 @@ class Vehicle:
         self.outbox.append(("connection", self.connection("ONLINE"), True))
         self._want_factsheet = self._dirty = True
         self._publish_due()
+        self._settle()
 
     @property
     def busy(self) -> bool:
@@ -548,6 +704,7 @@ class Vehicle:
             self.leg = Leg(
                 nodes, edges, self._speeds(edges), self.cfg.lookahead_m, _reach(nodes[-1])
             )
+            self.leg.attach(self._b, self._k)
         leg = self.leg
         tw = leg.twist(self.pose, self.mob)
         # pass the nodes the progress has reached
@@ -638,6 +795,7 @@ class Vehicle:
             self._error("fault", Problem.INTERNAL, f"{type(exc).__name__}: {exc}", {})
         self.twist, self.driving, self.leg = (0.0, 0.0, 0.0), False, None
         self._publish_due()
+        self._settle()
 
     def break_down(self, description: str = "breakdown") -> None:
         """A failure the scenario schedules: the vehicle stops for good and reports a FATAL
@@ -645,6 +803,7 @@ class Vehicle:
         self.broken = True
         self._error("fault", Problem.INTERNAL, description, {})
         self._publish_due()
+        self._settle()
 
     def drain(self) -> list[tuple[str, dict, bool]]:
         out, self.outbox = self.outbox, []
