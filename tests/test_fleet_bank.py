@@ -14,8 +14,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agvsim.control.mobility import Mobility, pursuit_twist
+from agvsim.fleet import messages
 from agvsim.fleet.bank import VehicleBank
 from agvsim.fleet.driver import FleetDriver
+from agvsim.fleet.messages import periodic_state
 from agvsim.fleet.motion import Leg
 from agvsim.fleet.order import OrderEdge, OrderNode
 from agvsim.master.config import GenerateConfig, MasterConfig
@@ -160,3 +162,20 @@ def test_the_batch_tick_changes_nothing_but_the_speed() -> None:
     ticks = sum(d.python_ticks for d in drivers)
     steps = round(150.0 / fast.fleet.sim.dt_s)
     assert ticks < 0.5 * steps * 8  # most control ticks never reached Python
+
+
+def test_a_periodic_state_is_the_state_built_afresh(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Between events a vehicle's periodic state is its last one with new motion and charge
+    (``messages.periodic_state``): it must equal the full message built at the same moment."""
+    built = periodic_state
+    checked = [0]
+
+    def both(v, last):
+        light, full = built(v, last), messages.state(v)
+        assert light | {"headerId": 0} == full | {"headerId": 0}
+        checked[0] += 1
+        return light
+
+    monkeypatch.setattr(messages, "periodic_state", both)
+    fleet_run(True, seconds=80.0)
+    assert checked[0] > 300

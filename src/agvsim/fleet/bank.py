@@ -12,11 +12,13 @@ copy of every value.
 
 ``tick`` (numba) runs each step over all vehicles. A vehicle whose control tick is due is
 handled there only when its Python side declared it *quiet* (no message waiting, nothing to
-publish before ``next_wake_s``, no action running, not paused, charging, broken or stopped by
-its field: ``Vehicle._settle``) and the tick changes nothing the protocol sees: no node passed,
-the leg's end not reached, ``driving`` unchanged, the battery not empty, no lidar return within
-the protective field's reach. Anything else flags the vehicle *slow* without touching its row,
-and its Python ``control`` runs the whole tick as before. The kernel follows the leg with the
+publish but the periodic messages, no action running, not paused, charging, broken or stopped
+by its field: ``Vehicle._settle``) and the tick changes nothing the protocol sees: no node
+passed, the leg's end not reached, ``driving`` unchanged, the battery not empty, no lidar
+return within the protective field's reach. Anything else flags the vehicle *slow* without
+touching its row, and its Python ``control`` runs the whole tick as before. A quiet vehicle
+whose periodic state or visualization is due (``next_wake_s``) is flagged *publish*: Python
+only builds those messages. The kernel follows the leg with the
 same arithmetic as ``agvsim.fleet.motion.Leg.twist`` (tested against it).
 """
 
@@ -258,6 +260,7 @@ def tick(
     mail: np.ndarray,
     out: np.ndarray,
     slow: np.ndarray,
+    publish: np.ndarray,
     t_s: np.ndarray,
     pose: np.ndarray,
     twist: np.ndarray,
@@ -298,16 +301,18 @@ def tick(
     mount_m: np.ndarray,
 ) -> None:
     """One step for every vehicle: ``out`` the twist to command; ``slow[k]`` True where the
-    vehicle's Python ``control`` must run this step (its row then untouched)."""
+    vehicle's Python ``control`` must run this step (its row then untouched); ``publish[k]``
+    where the tick was done here and a periodic message is due (Python publishes it)."""
     for k in range(len(out)):
         slow[k] = False
+        publish[k] = False
         if mail[k]:
             slow[k] = True
             continue
         if t < next_control_s[k] - 1e-9:  # held between control ticks
             out[k, 0], out[k, 1], out[k, 2] = twist[k, 0], twist[k, 1], twist[k, 2]
             continue
-        if not quiet[k] or t >= next_wake_s[k] - 1e-9:
+        if not quiet[k]:
             slow[k] = True
             continue
         x, y, th = poses[k, 0], poses[k, 1], poses[k, 2]
@@ -364,6 +369,7 @@ def tick(
         twist[k, 0], twist[k, 1], twist[k, 2] = vx, vy, w
         next_control_s[k] = t + period_s[k]
         out[k, 0], out[k, 1], out[k, 2] = vx, vy, w
+        publish[k] = t >= next_wake_s[k] - 1e-9
 
 
 def run_tick(
@@ -374,6 +380,7 @@ def run_tick(
     mail: np.ndarray,
     out: np.ndarray,
     slow: np.ndarray,
+    publish: np.ndarray,
 ) -> None:
     b = bank
     tick(
@@ -383,6 +390,7 @@ def run_tick(
         mail,
         out,
         slow,
+        publish,
         b.t_s,
         b.pose,
         b.twist,

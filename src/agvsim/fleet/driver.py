@@ -27,6 +27,7 @@ class FleetDriver:
             v.bind(self.bank, k)
         n = len(self.vehicles)
         self._out, self._slow = np.zeros((n, 3)), np.zeros(n, dtype=np.bool_)
+        self._publish = np.zeros(n, dtype=np.bool_)
         self._no_ranges = np.full(n, np.inf)
         self.python_ticks = 0  # vehicle ticks that ran in Python (for benchmarks)
 
@@ -40,9 +41,11 @@ class FleetDriver:
         rmin = self._no_ranges if ranges is None else ranges.min(axis=1)
         mail = np.fromiter((len(v.inbox) > 0 for v in vs), dtype=np.bool_, count=n)
         poses = np.ascontiguousarray(obs.true_pose, dtype=np.float64)
-        out, slow = self._out, self._slow
+        out, slow, publish = self._out, self._slow, self._publish
         if self.batch:
-            run_tick(self.bank, float(obs.t_s), poses, rmin, mail, out, slow)
+            run_tick(self.bank, float(obs.t_s), poses, rmin, mail, out, slow, publish)
+            for j in np.flatnonzero(publish):
+                vs[j].publish_periodic()
         else:  # every vehicle in Python (the reference the batch tick is tested against)
             slow[:] = True
         todo = np.flatnonzero(slow)

@@ -125,6 +125,25 @@ def state(v: Vehicle) -> dict:
     }
 
 
+def periodic_state(v: Vehicle, last: dict) -> dict:
+    """The vehicle's ``state`` when nothing but its motion and charge changed since ``last``
+    (its previous state message: no event in between, see ``Vehicle._publish_due``): that
+    message with a new header, position, velocity, battery and distance since the node.
+    The same dict ``state`` would build, for a fraction of the work."""
+    out = dict(last)
+    out.update(v.stamp.header("state", v.t_s))
+    out["distanceSinceLastNode"] = round(v.distance_since_node_m, 4)
+    out["velocity"] = velocity_json(v.twist)
+    pos = position_json(v.pose, v.cfg.map_id, v.v3)
+    if v.v3:
+        out["powerSupply"] = v.battery.state_json(True)
+        out["mobileRobotPosition"] = pos
+    else:
+        out["batteryState"] = v.battery.state_json(False)
+        out["agvPosition"] = pos
+    return out
+
+
 def visualization(
     stamp: Stamper, t_s: float, pose: np.ndarray, twist: tuple, map_id: str, state_header_id: int
 ) -> dict:

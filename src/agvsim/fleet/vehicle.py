@@ -127,6 +127,7 @@ class Vehicle:
         self.route_nodes: list[OrderNode] = []  # not yet traversed (nodeStates)
         self.route_edges: list[OrderEdge] = []  # not yet left (edgeStates)
         # node/edge state entries per route list (``node_states``)
+        self._last_state: dict | None = None  # the last state published
         self._ns_src: list[OrderNode] | None = None
         self._ns_json: list[dict] = []
         self._ns_released = 0
@@ -309,6 +310,12 @@ class Vehicle:
         self._publish_due()
         self._settle()
         return tw
+
+    def publish_periodic(self) -> None:
+        """The batch tick did this vehicle's control tick and its periodic state or
+        visualization is due: publish it."""
+        self._publish_due()
+        self._settle()
 
     def node_states(self) -> tuple[list[dict], int]:
         """``state.nodeStates`` and how many of those nodes are released. The route only
@@ -782,7 +789,14 @@ class Vehicle:
             self.outbox.append(("factsheet", self.factsheet(), True))
             self._want_factsheet = False
         if self._dirty or t >= self._next_state_s - 1e-9:
-            self.outbox.append(("state", self.state(), False))
+            # every change the protocol sees sets _dirty: without one, only motion and
+            # charge differ from the last state published
+            last = self._last_state
+            msg = (
+                self.state() if self._dirty or last is None else messages.periodic_state(self, last)
+            )
+            self._last_state = msg
+            self.outbox.append(("state", msg, False))
             self._dirty = False
             self._next_state_s = t + self.cfg.state_period_s
         if self.cfg.vis_period_s > 0 and t >= self._next_vis_s - 1e-9:
