@@ -53,6 +53,7 @@ class VehicleBank:
         self.period_s = z(n)
         self.next_wake_s = z(n)  # the next publish due (state / visualization)
         self.quiet = z(n, dtype=np.bool_)
+        self.mail = z(n, dtype=np.bool_)  # a message waits in the inbox (set by ``receive``)
         self.driving = z(n, dtype=np.bool_)
         # the leg
         self.has_leg = z(n, dtype=np.bool_)

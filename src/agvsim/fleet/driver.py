@@ -36,10 +36,10 @@ class FleetDriver:
             raise ValueError(f"FleetDriver drives {len(self.vehicles)} vehicles, not {k}")
 
     def step(self, obs: BatchObservation) -> np.ndarray:
-        vs, n = self.vehicles, len(self.vehicles)
+        vs = self.vehicles
         ranges = obs.ranges[self.sensor] if self.sensor and self.sensor in obs.ranges else None
         rmin = self._no_ranges if ranges is None else ranges.min(axis=1)
-        mail = np.fromiter((len(v.inbox) > 0 for v in vs), dtype=np.bool_, count=n)
+        mail = self.bank.mail
         poses = np.ascontiguousarray(obs.true_pose, dtype=np.float64)
         out, slow, publish = self._out, self._slow, self._publish
         if self.batch:
@@ -52,6 +52,7 @@ class FleetDriver:
         self.python_ticks += len(todo)
         for j in todo:
             v = vs[j]
+            mail[j] = False  # before control empties the inbox: a message meanwhile sets it
             try:
                 out[j] = v.control(obs.t_s, poses[j], None if ranges is None else ranges[j])
             except Exception as exc:  # noqa: BLE001 - one vehicle's fault stops it, not the run

@@ -240,10 +240,13 @@ class MqttTransport:
         """Publish everything the vehicles queued (dropped while a vehicle is offline: its
         state is republished whole when it reconnects)."""
         for link in self.links:
+            v = link.vehicle
+            if v is None or not v.outbox:  # most vehicles publish nothing in a step
+                continue
             if link.online:
                 self._flush_one(link)
-            elif link.vehicle is not None:
-                link.vehicle.drain()
+            else:
+                v.drain()
         self._write_pending()
 
     def close(self) -> None:

@@ -42,7 +42,7 @@ MIN_TOLERANCE_RAD = 0.02
 MAX_INSTANT_STATES = 50
 # a vehicle's own values in a VehicleBank row (copied by ``Vehicle.bind``)
 ROW = (
-    "t_s pose twist dist_node_m next_control_s period_s next_wake_s quiet driving "
+    "t_s pose twist dist_node_m next_control_s period_s next_wake_s quiet mail driving "
     "look_m tol_m next_node_s holonomic can_spin kmax min_r_m use_field front_m reaction_s "
     "decel_m_s2 margin_m half_width_m mount_m"
 ).split()
@@ -274,6 +274,7 @@ class Vehicle:
         """Queue a message (bytes, str or dict) for ``order`` or ``instantActions``; it is
         handled at the next ``control`` call. Safe to call from another thread."""
         self.inbox.append((topic, payload))
+        self._b.mail[self._k] = True
 
     def control(self, t_s: float, pose: np.ndarray, ranges: np.ndarray | None) -> tuple:
         """One simulation step: handle messages, run actions, drive, publish. Returns the
