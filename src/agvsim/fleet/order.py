@@ -193,6 +193,8 @@ def parse_order(
 def _actions(
     raw: list, where: str, scope: str, supported: dict, limits: Limits, oid: dict
 ) -> list[Action]:
+    if not raw:
+        return []
     if len(raw) > limits.max_actions_per_element:
         raise OrderRefused(
             Problem.TOO_LARGE,
@@ -241,7 +243,9 @@ def _node(
         _deviation(pos or {}, "allowedDeviationXY", DEFAULT_DEVIATION_XY_M),
         _deviation(pos or {}, "allowedDeviationTheta", DEFAULT_DEVIATION_THETA_RAD),
         map_id,
-        _actions(n["actions"], f"nodes[{i}] ({nid})", "NODE", supported, limits, oid),
+        _actions(n["actions"], f"nodes[{i}] ({nid})", "NODE", supported, limits, oid)
+        if n["actions"]
+        else [],
     )
 
 
@@ -287,5 +291,7 @@ def _edge(
         e["endNodeId"],
         None if speed is None else float(speed),
         traj,
-        _actions(e["actions"], f"edges[{i}] ({e['edgeId']})", "EDGE", supported, limits, oid),
+        _actions(e["actions"], f"edges[{i}] ({e['edgeId']})", "EDGE", supported, limits, oid)
+        if e["actions"]
+        else [],
     )
