@@ -211,6 +211,8 @@ def test_cli_fleet_runs_and_stops_on_sigint(tmp_path: Path) -> None:
     child.send_signal(signal.SIGINT)
     rest = child.communicate(timeout=20)[0]
     assert child.returncode == 130 and "OFFLINE" in rest
+    # no master: block, so agvsim's master stays out of the way of the one driving it
+    assert "master: none - the scenario has no 'master:' block" in rest
 
 
 def order_for_room() -> dict:

@@ -47,6 +47,9 @@ def fleet_command(
                 f"{len(layout.edges)} edges, {len(layout.stations)} stations)",
             )
             return 0
+        idle_master = master and sc.master is None
+        if idle_master:  # nothing to dispatch: it would only send idle vehicles to charge
+            master = False
         if master:
             from agvsim.master.mqtt import MasteredFleetRun
 
@@ -86,6 +89,12 @@ def fleet_command(
             )
         if master:
             _say(out, "master: agvsim's (dispatch, SIPP routes, reservations); --no-master: none")
+        elif idle_master:
+            _say(
+                out,
+                "master: none - the scenario has no 'master:' block (transport orders), so the "
+                "vehicles wait for yours (scenarios/warehouse_operations.yaml has orders)",
+            )
         pace = "as fast as it can" if speed <= 0 else f"{speed:g}x real time"
         _say(out, f"running ({pace}); Ctrl-C stops")
         with terminate_as_interrupt():  # SIGTERM stops it like Ctrl-C; the handler is restored
