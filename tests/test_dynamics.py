@@ -600,6 +600,7 @@ def test_braking_scenario_stops_against_the_closed_form(tmp_path):
         SCENARIOS / "dynamics_braking.yaml", tmp_path, plot=False, record_mcap=False
     )
     stops = {r["name"]: r["stops"][0] for r in data["dynamics"]}
+    assert all(r["newton_unconverged"]["stages"] == 0 for r in data["dynamics"])
     for s in stops.values():
         assert s["distance_m"] == pytest.approx(s["closed_form_m"], rel=0.01)
     assert stops["empty_dry"]["closed_form_m"] == pytest.approx(
@@ -620,6 +621,7 @@ def test_mecanum_oil_scenario_slides_and_drifts(tmp_path):
         SCENARIOS / "dynamics_mecanum_oil.yaml", tmp_path, plot=False, record_mcap=False
     )
     stops = {r["name"]: r["stops"][0] for r in data["dynamics"]}
+    assert all(r["newton_unconverged"]["stages"] == 0 for r in data["dynamics"])
     assert stops["oily"]["mu"] == 0.1 and stops["dry"]["mu"] == 0.8
     expected = math.sqrt(2) * 0.8**2 / (2 * 0.1 * G_M_S2)
     assert stops["oily"]["distance_m"] == pytest.approx(expected, rel=0.01)
@@ -634,6 +636,7 @@ def test_thesis_maze_with_dynamics_drifts_without_encoder_noise(tmp_path):
         SCENARIOS / "dynamics_thesis_maze.yaml", tmp_path, 40.0, plot=False, record_mcap=False
     )
     robot = data["robots"][0]
+    assert data["dynamics"][0]["newton_unconverged"]["stages"] == 0
     assert robot["distance_m"] > 20.0
     assert robot["odometry_error_m"] > 0.2
 

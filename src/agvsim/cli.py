@@ -304,6 +304,11 @@ def run(
         )
     if r["status"] != "completed":
         out.print(f"  status: {r['status']}")
+    from agvsim.dynamics.vehicle import newton_warning
+
+    unconverged = newton_warning(data.get("dynamics", []))
+    if unconverged is not None:  # once a run (agvsim.dynamics)
+        _fail("warning", unconverged, style="yellow")
     written = ["summary.json", "trajectory.csv"] + ([] if no_plot else ["plot.png"])
     written += [] if no_mcap else ["run.mcap"]
     written += sorted(p.name for p in Path(out_dir).glob("*.mp4"))
