@@ -733,10 +733,15 @@ def test_wheels_plot_reads_torque_and_slip_back(tmp_path):
     from agvsim.runner import run_scenario
     from agvsim.viz.wheels_plot import read_wheels
 
-    run_scenario(SCENARIOS / "dynamics_braking.yaml", tmp_path, 3.5, record_mcap=False)
+    out = run_scenario(SCENARIOS / "dynamics_braking.yaml", tmp_path, 3.5, record_mcap=False)
     assert (tmp_path / "wheels.png").stat().st_size > 10_000
     data = read_wheels(tmp_path / "trajectory.csv", {"empty_wet": ["left", "right"]})
     d = data["empty_wet"]
+    # the odometry's drift: none before the wheels slip, the summary's at the end (the
+    # CSV's positions are rounded to 1 um)
+    assert d["odometry_error_m"][0] == 0.0
+    final = {r["name"]: r["odometry_error_m"] for r in out["robots"]}["empty_wet"]
+    assert final > 0.01 and d["odometry_error_m"][-1] == pytest.approx(final, abs=2e-6)
     assert d["t"][0] == 0.0 and d["t"][-1] == pytest.approx(3.5)
     assert d["torque_nm"].shape == d["slip_m_s"].shape == (len(d["t"]), 2)
     braking = (d["t"] > 3.05) & (d["t"] < 3.4)  # sliding on the wet strip, wheels held

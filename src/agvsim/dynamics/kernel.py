@@ -16,10 +16,12 @@ f(Y2). Each stage is solved by Newton's method; its linear system (body + wheels
 symmetric positive definite and each wheel is eliminated in closed form, leaving 3 x 3.
 A step is one sub-step unless ``max_substep_s`` is shorter; a sub-step is halved (on a
 dyadic grid, see ``substep_count``) where a kink of the friction law or a torque limit is
-crossed, where new targets start a transient and where the error estimate is large. The
-pose moves exactly on SE(2) with the stage twists weighted (1 - gamma, gamma). The step's
-start-to-end pose change is handed back as the constant twist that reproduces it (the SE(2)
-logarithm), so the engine's swept collision checks move the body as before.
+crossed, where new targets start a transient, where the error estimate is large and where a
+stage's Newton iteration did not converge (what still does not at the shortest sub-step is
+counted per robot and handed back). The pose moves exactly on SE(2) with the stage twists
+weighted (1 - gamma, gamma). The step's start-to-end pose change is handed back as the
+constant twist that reproduces it (the SE(2) logarithm), so the engine's swept collision
+checks move the body as before.
 """
 
 from __future__ import annotations
@@ -109,9 +111,10 @@ def motor_torque(
 def substep_count(body: np.ndarray, d: int, dt: float) -> tuple[int, int]:
     """Sub-steps of a step: ``n`` of at most max_substep_s (one by default: the method is
     L-stable, stiff contacts need no bound), each halved up to ``levels`` times where a wheel
-    crosses the friction law's kink or a motor's torque limit, where targets change and where
-    the error estimate is large, down to REFINE_PER_TIME_CONSTANT x the shorter of the motor's
-    and the steering servo's time constants, or REFINE_MAX_S if shorter."""
+    crosses the friction law's kink or a motor's torque limit, where targets change, where
+    the error estimate is large and where Newton's method did not converge, down to
+    REFINE_PER_TIME_CONSTANT x the shorter of the motor's and the steering servo's time
+    constants, or REFINE_MAX_S if shorter."""
     tau = body[d, B_MTAU]
     if body[d, B_STEER] > 0.5:
         tau = min(tau, body[d, B_STAU])
