@@ -600,6 +600,7 @@ def test_braking_scenario_stops_against_the_closed_form(tmp_path):
         SCENARIOS / "dynamics_braking.yaml", tmp_path, plot=False, record_mcap=False
     )
     stops = {r["name"]: r["stops"][0] for r in data["dynamics"]}
+    assert all(r["newton_unconverged"]["stages"] == 0 for r in data["dynamics"])
     for s in stops.values():
         assert s["distance_m"] == pytest.approx(s["closed_form_m"], rel=0.01)
     assert stops["empty_dry"]["closed_form_m"] == pytest.approx(
@@ -620,6 +621,7 @@ def test_mecanum_oil_scenario_slides_and_drifts(tmp_path):
         SCENARIOS / "dynamics_mecanum_oil.yaml", tmp_path, plot=False, record_mcap=False
     )
     stops = {r["name"]: r["stops"][0] for r in data["dynamics"]}
+    assert all(r["newton_unconverged"]["stages"] == 0 for r in data["dynamics"])
     assert stops["oily"]["mu"] == 0.1 and stops["dry"]["mu"] == 0.8
     expected = math.sqrt(2) * 0.8**2 / (2 * 0.1 * G_M_S2)
     assert stops["oily"]["distance_m"] == pytest.approx(expected, rel=0.01)
@@ -634,6 +636,7 @@ def test_thesis_maze_with_dynamics_drifts_without_encoder_noise(tmp_path):
         SCENARIOS / "dynamics_thesis_maze.yaml", tmp_path, 40.0, plot=False, record_mcap=False
     )
     robot = data["robots"][0]
+    assert data["dynamics"][0]["newton_unconverged"]["stages"] == 0
     assert robot["distance_m"] > 20.0
     assert robot["odometry_error_m"] > 0.2
 
@@ -730,10 +733,15 @@ def test_wheels_plot_reads_torque_and_slip_back(tmp_path):
     from agvsim.runner import run_scenario
     from agvsim.viz.wheels_plot import read_wheels
 
-    run_scenario(SCENARIOS / "dynamics_braking.yaml", tmp_path, 3.5, record_mcap=False)
+    out = run_scenario(SCENARIOS / "dynamics_braking.yaml", tmp_path, 3.5, record_mcap=False)
     assert (tmp_path / "wheels.png").stat().st_size > 10_000
     data = read_wheels(tmp_path / "trajectory.csv", {"empty_wet": ["left", "right"]})
     d = data["empty_wet"]
+    # the odometry's drift: none before the wheels slip, the summary's at the end (the
+    # CSV's positions are rounded to 1 um)
+    assert d["odometry_error_m"][0] == 0.0
+    final = {r["name"]: r["odometry_error_m"] for r in out["robots"]}["empty_wet"]
+    assert final > 0.01 and d["odometry_error_m"][-1] == pytest.approx(final, abs=2e-6)
     assert d["t"][0] == 0.0 and d["t"][-1] == pytest.approx(3.5)
     assert d["torque_nm"].shape == d["slip_m_s"].shape == (len(d["t"]), 2)
     braking = (d["t"] > 3.05) & (d["t"] < 3.4)  # sliding on the wet strip, wheels held

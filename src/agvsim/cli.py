@@ -304,7 +304,13 @@ def run(
         )
     if r["status"] != "completed":
         out.print(f"  status: {r['status']}")
+    from agvsim.dynamics.vehicle import newton_warning
+
+    unconverged = newton_warning(data.get("dynamics", []))
+    if unconverged is not None:  # once a run (agvsim.dynamics)
+        _fail("warning", unconverged, style="yellow")
     written = ["summary.json", "trajectory.csv"] + ([] if no_plot else ["plot.png"])
+    written += ["wheels.png"] if data.get("dynamics") and not no_plot else []
     written += [] if no_mcap else ["run.mcap"]
     written += sorted(p.name for p in Path(out_dir).glob("*.mp4"))
     written += [f"{s['dir']}/" for s in data.get("slam", {}).values()]

@@ -124,9 +124,11 @@ class BrakeMonitor:
         """One step: ``poses`` (D, 3) at its start, ``twist`` (D, 3) over it, speeds at its
         start and end, ``braking`` (D,) all driven wheels commanded to zero, ``velocity``
         (D, 3) at its start."""
-        starting = braking & (speed_before > self.min_speed)
+        watch = (braking & (speed_before > self.min_speed)) | self._on
         self.started = []
-        for d in np.flatnonzero(starting | self._on):
+        if not watch.any():  # the common case: nobody brakes
+            return
+        for d in np.flatnonzero(watch):
             stop = self.active[d]
             if not braking[d]:
                 self.active[d], self._on[d] = None, False

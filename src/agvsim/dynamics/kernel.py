@@ -16,10 +16,12 @@ f(Y2). Each stage is solved by Newton's method; its linear system (body + wheels
 symmetric positive definite and each wheel is eliminated in closed form, leaving 3 x 3.
 A step is one sub-step unless ``max_substep_s`` is shorter; a sub-step is halved (on a
 dyadic grid, see ``substep_count``) where a kink of the friction law or a torque limit is
-crossed, where new targets start a transient and where the error estimate is large. The
-pose moves exactly on SE(2) with the stage twists weighted (1 - gamma, gamma). The step's
-start-to-end pose change is handed back as the constant twist that reproduces it (the SE(2)
-logarithm), so the engine's swept collision checks move the body as before.
+crossed, where new targets start a transient, where the error estimate is large and where a
+stage's Newton iteration did not converge (what still does not at the shortest sub-step is
+counted per robot and handed back). The pose moves exactly on SE(2) with the stage twists
+weighted (1 - gamma, gamma). The step's start-to-end pose change is handed back as the
+constant twist that reproduces it (the SE(2) logarithm), so the engine's swept collision
+checks move the body as before.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ KIND_2D = 0  # a standard wheel: friction in both directions (friction circle)
 KIND_1D = 1  # force only along the axis at angle gamma to the rolling direction (rollers)
 STEER_NONE, STEER_BICYCLE, STEER_ACKERMANN = 0, 1, 2
 MAX_SUBSTEPS = 100_000
+CHUNKS = 64  # robots are split into this many chunks (threads take chunks), each with its scratch
 GAMMA = 1.0 - 1.0 / math.sqrt(2.0)  # SDIRK2: L-stable, second order
 REFINE_PER_TIME_CONSTANT = 0.0125  # the shortest sub-step, in controller time constants
 REFINE_MAX_S = 1e-3  # the shortest sub-step is at most this long
@@ -52,9 +55,12 @@ SERVO_STEP_S = 1e-3  # the steering servo's own step
 NEWTON_ITERATIONS = 30  # at most, per stage (two or three when nothing saturates)
 NEWTON_TOL_M_S = 1e-5  # converged when no velocity (or r phi) moved by more: the next
 # correction, quadratically smaller, is ~1e-9 m/s
+# rounding-level licence for the compiler (reassociation, fused multiply-add, reciprocals,
+# the sign of zero); never "no infinities": a motor without a speed limit has w0 = inf
+FASTMATH = {"reassoc", "contract", "arcp", "nsz"}
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def _q(slip: float, vslip: float, tyre: bool) -> float:
     """Friction per unit of mu N and of slip speed: F = -mu N q(|s|) s."""
     if tyre:
@@ -63,7 +69,7 @@ def _q(slip: float, vslip: float, tyre: bool) -> float:
     return 1.0 / max(slip, vslip)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def _dq(slip: float, vslip: float, tyre: bool) -> float:
     """d q / d |s|."""
     if tyre:
@@ -75,7 +81,7 @@ def _dq(slip: float, vslip: float, tyre: bool) -> float:
     return 0.0 if slip < vslip else -1.0 / (slip * slip)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def motor_torque(
     gain: float,
     target: float,
@@ -101,17 +107,18 @@ def motor_torque(
     return cmd, -gain
 
 
-@njit(cache=True, error_model="numpy")
-def substep_count(body: np.ndarray, dt: float) -> tuple[int, int]:
+@njit(inline="always", cache=True, error_model="numpy", fastmath=FASTMATH)
+def substep_count(body: np.ndarray, d: int, dt: float) -> tuple[int, int]:
     """Sub-steps of a step: ``n`` of at most max_substep_s (one by default: the method is
     L-stable, stiff contacts need no bound), each halved up to ``levels`` times where a wheel
-    crosses the friction law's kink or a motor's torque limit, where targets change and where
-    the error estimate is large, down to REFINE_PER_TIME_CONSTANT x the shorter of the motor's
-    and the steering servo's time constants, or REFINE_MAX_S if shorter."""
-    tau = body[B_MTAU]
-    if body[B_STEER] > 0.5:
-        tau = min(tau, body[B_STAU])
-    n = min(max(int(math.ceil(dt / body[B_MAXSUB] - 1e-9)), 1), MAX_SUBSTEPS)
+    crosses the friction law's kink or a motor's torque limit, where targets change, where
+    the error estimate is large and where Newton's method did not converge, down to
+    REFINE_PER_TIME_CONSTANT x the shorter of the motor's and the steering servo's time
+    constants, or REFINE_MAX_S if shorter."""
+    tau = body[d, B_MTAU]
+    if body[d, B_STEER] > 0.5:
+        tau = min(tau, body[d, B_STAU])
+    n = min(max(int(math.ceil(dt / body[d, B_MAXSUB] - 1e-9)), 1), MAX_SUBSTEPS)
     levels = 0
     h_min = min(REFINE_PER_TIME_CONSTANT * tau, REFINE_MAX_S)
     while levels < MAX_LEVELS and dt / n / (1 << levels) > h_min:
@@ -119,35 +126,38 @@ def substep_count(body: np.ndarray, dt: float) -> tuple[int, int]:
     return n, levels
 
 
-@njit(cache=True, error_model="numpy")
-def wheel_angle(wheel: np.ndarray, delta: float, wheelbase: float) -> float:
-    """Rolling direction of a wheel in the robot frame (rad) for bicycle steering delta."""
-    kind = int(wheel[W_STEER])
+@njit(inline="always", cache=True, error_model="numpy", fastmath=FASTMATH)
+def wheel_angle(wheel: np.ndarray, d: int, i: int, delta: float, wheelbase: float) -> float:
+    """Rolling direction of wheel i of robot d in the robot frame (rad) for bicycle steering
+    delta."""
+    kind = int(wheel[d, i, W_STEER])
     if kind == STEER_BICYCLE:
-        return wheel[W_BETA] + delta
+        return wheel[d, i, W_BETA] + delta
     if kind == STEER_ACKERMANN:
         k = math.tan(delta) / wheelbase
-        return wheel[W_BETA] + math.atan(k * wheelbase / (1.0 - k * wheel[W_PY]))
-    return wheel[W_BETA]
+        return wheel[d, i, W_BETA] + math.atan(k * wheelbase / (1.0 - k * wheel[d, i, W_PY]))
+    return wheel[d, i, W_BETA]
 
 
-@njit(cache=True, error_model="numpy")
-def set_directions(wheel: np.ndarray, nw: int, delta: float, wheelbase: float, dirs: np.ndarray):
-    """dirs (W, 4): cos, sin of each wheel's rolling direction and of its force axis."""
+@njit(inline="always", cache=True, error_model="numpy", fastmath=FASTMATH)
+def set_directions(
+    wheel: np.ndarray, d: int, nw: int, delta: float, wheelbase: float, dirs: np.ndarray
+):
+    """dirs (W, 4): cos, sin of robot d's wheels''s rolling direction and of its force axis."""
     for i in range(nw):
-        if int(wheel[i, W_STEER]) == STEER_NONE:
+        if int(wheel[d, i, W_STEER]) == STEER_NONE:
             for k in range(4):
-                dirs[i, k] = wheel[i, W_DIRS + k]
+                dirs[i, k] = wheel[d, i, W_DIRS + k]
             continue
-        ang = wheel_angle(wheel[i], delta, wheelbase)
-        gam = wheel[i, W_GAMMA]
+        ang = wheel_angle(wheel, d, i, delta, wheelbase)
+        gam = wheel[d, i, W_GAMMA]
         dirs[i, 0], dirs[i, 1] = math.cos(ang), math.sin(ang)
         dirs[i, 2], dirs[i, 3] = math.cos(ang + gam), math.sin(ang + gam)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", cache=True, error_model="numpy", fastmath=FASTMATH)
 def servo(
-    b: np.ndarray, delta: float, rate: float, target: float, dur: float
+    body: np.ndarray, d: int, delta: float, rate: float, target: float, dur: float
 ) -> tuple[float, float]:
     """The steering servo over ``dur`` seconds: first order (exact between its own steps of
     at most SERVO_STEP_S), rate limited by the model and acceleration limited by the
@@ -156,35 +166,39 @@ def servo(
         return delta, rate
     n = int(math.ceil(dur / SERVO_STEP_S - 1e-9))
     hs = dur / n
-    gain = -math.expm1(-hs / b[B_STAU]) / hs  # the exact first-order step, as a rate
-    acc = b[B_SACC] * hs
+    gain = -math.expm1(-hs / body[d, B_STAU]) / hs  # the exact first-order step, as a rate
+    acc = body[d, B_SACC] * hs
     for _ in range(n):
-        want = min(max((target - delta) * gain, -b[B_RATE]), b[B_RATE])
+        want = min(max((target - delta) * gain, -body[d, B_RATE]), body[d, B_RATE])
         rate += min(max(want - rate, -acc), acc)
         delta += hs * rate
-        if abs(delta) > b[B_DMAX]:
-            delta = math.copysign(b[B_DMAX], delta)
+        if abs(delta) > body[d, B_DMAX]:
+            delta = math.copysign(body[d, B_DMAX], delta)
             rate = 0.0
     return delta, rate
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", cache=True, error_model="numpy", fastmath=FASTMATH)
 def solve_stage(
-    b: np.ndarray,
-    wheel: np.ndarray,  # (W, NWC) this robot's wheels
+    body: np.ndarray,  # (D, NB)
+    wheel: np.ndarray,  # (D, W, NWC)
+    d: int,  # the robot
     mu_n: np.ndarray,  # (W,) mu N under each wheel
     dirs: np.ndarray,  # (W, 4) directions at the stage's time
-    target: np.ndarray,  # (W,) wheel-speed targets
+    target: np.ndarray,  # (D, W) wheel-speed targets
     gh: float,  # gamma h
     a: np.ndarray,  # (3 + W,) the stage's explicit part: y = a + gamma h f(y)
     y: np.ndarray,  # (3 + W,) in: first guess; out: the stage value
     tau: np.ndarray,  # (W,) out: motor torque at y
     slip: np.ndarray,  # (W,) out: slip speed at y; phi of free wheels in y
     kap: np.ndarray,  # (W, NKAP) scratch
-) -> int:
+    iterations: int,  # Newton iterations at most
+) -> tuple[int, float]:
     """Newton's method for one implicit stage, y = a + gh f(y), y = (v_c, omega, phi).
     Returns the regime of the solution: per wheel, whether it slides (past the Coulomb
-    law's kink) and whether its motor is at a torque limit (two bits a wheel).
+    law's kink) and whether its motor is at a torque limit (two bits a wheel); and 0.0 when
+    the iteration converged, else its last correction (m/s: velocities, the yaw rate and
+    spins times the wheel radius), the residual it stopped at.
 
     Each iteration linearises the contact forces F(s) (dF/ds = D, symmetric negative
     semi-definite: friction is the gradient of a convex function of the slip) and the motor
@@ -192,11 +206,12 @@ def solve_stage(
     positive definite; each wheel's row is solved for its spin and put into the body's 3 x 3
     (the Schur complement). The yaw-rate coupling omega x v_c stays out of the matrix (it
     is slow: the iteration still contracts at once)."""
-    nw = int(b[B_NW])
-    m, inertia, cx, cy = b[B_MASS], b[B_INERTIA], b[B_CX], b[B_CY]
-    r, vslip, tyre = b[B_RADIUS], b[B_VSLIP], b[B_TYRE] > 0.5
+    nw = int(body[d, B_NW])
+    m, inertia, cx, cy = body[d, B_MASS], body[d, B_INERTIA], body[d, B_CX], body[d, B_CY]
+    r, vslip, tyre = body[d, B_RADIUS], body[d, B_VSLIP], body[d, B_TYRE] > 0.5
     sig = 0
-    for _ in range(NEWTON_ITERATIONS):
+    big = 0.0
+    for _ in range(iterations):
         sig = 0
         vx, vy, w = y[0], y[1], y[2]
         # the body's rows, times the mass: M (y - a) - gh (Q + M gyro)
@@ -205,19 +220,18 @@ def solve_stage(
         r2 = inertia * (w - a[2])
         s00, s01, s02, s11, s12, s22 = m, 0.0, 0.0, m, 0.0, inertia
         for i in range(nw):
-            wi = wheel[i]
-            dx, dy = wi[W_PX] - cx, wi[W_PY] - cy
+            dx, dy = wheel[d, i, W_PX] - cx, wheel[d, i, W_PY] - cy
             ux, uy = vx - w * dy, vy + w * dx  # contact point velocity
             ca, sa = dirs[i, 0], dirs[i, 1]
-            driven = wi[W_DRIVEN] > 0.5
+            driven = wheel[d, i, W_DRIVEN] > 0.5
             p = y[3 + i]
-            if int(wi[W_KIND]) == KIND_2D and driven:
+            if int(wheel[d, i, W_KIND]) == KIND_2D and driven:
                 # rows of u.e and u.n in (v_c, omega)
                 gm0, gm1, gm2 = ca, sa, -dy * ca + dx * sa
                 gs0, gs1, gs2 = -sa, ca, dy * sa + dx * ca
                 sm = ux * ca + uy * sa - r * p
                 st = -ux * sa + uy * ca
-                sn = math.hypot(sm, st)
+                sn = math.sqrt(sm * sm + st * st)
                 q = _q(sn, vslip, tyre)
                 dqs = _dq(sn, vslip, tyre) / sn if sn > 0.0 else 0.0
                 fm, ft = -mu_n[i] * q * sm, -mu_n[i] * q * st
@@ -235,7 +249,7 @@ def solve_stage(
                 kap[i, 5], kap[i, 6], kap[i, 7], kap[i, 8] = sm, st, gm0, gm1
                 kap[i, 9], kap[i, 10], kap[i, 11], kap[i, 12] = gm2, gs0, gs1, gs2
             else:
-                if int(wi[W_KIND]) == KIND_2D:  # a free standard wheel: side force only
+                if int(wheel[d, i, W_KIND]) == KIND_2D:  # a free standard wheel: side force only
                     ax, ay = -sa, ca
                 else:
                     ax, ay = dirs[i, 2], dirs[i, 3]
@@ -270,12 +284,18 @@ def solve_stage(
             s22 -= gh * h22
             if driven:
                 tq, dtq = motor_torque(
-                    b[B_GAIN], target[i], p, b[B_GEAR], b[B_TMAX], b[B_TSTALL], b[B_W0]
+                    body[d, B_GAIN],
+                    target[d, i],
+                    p,
+                    body[d, B_GEAR],
+                    body[d, B_TMAX],
+                    body[d, B_TSTALL],
+                    body[d, B_W0],
                 )
                 tau[i] = tq
                 if dtq == 0.0:
                     sig |= 1 << (2 * i + 1)
-                jw = wi[W_J]
+                jw = wheel[d, i, W_J]
                 rp = jw * (p - a[3 + i]) - gh * (tq - rc * fmain)
                 dinv = 1.0 / (jw - gh * (dtq + rc * rc * dmain))
                 # eliminate the spin: dphi = (-rp + gh k . dv) / d
@@ -316,9 +336,9 @@ def solve_stage(
         # closest to zero: inside the zone, where the next step sees the law's slope.
         frac = 1.0
         for i in range(nw):
-            sm, st = kap[i, 5], kap[i, 6]
-            if math.hypot(sm, st) < vslip:
+            if slip[i] < vslip:  # this iteration's |s| (kap 5, 6)
                 continue
+            sm, st = kap[i, 5], kap[i, 6]
             dsm = kap[i, 7] * dv0 + kap[i, 8] * dv1 + kap[i, 9] * dv2 - kap[i, 13] * kap[i, 14]
             dst = kap[i, 10] * dv0 + kap[i, 11] * dv1 + kap[i, 12] * dv2
             dd = dsm * dsm + dst * dst
@@ -333,18 +353,18 @@ def solve_stage(
         y[0] += dv0
         y[1] += dv1
         y[2] += dv2
-        big = max(abs(dv0), abs(dv1), abs(dv2) * b[B_RADIUS])
+        big = max(abs(dv0), abs(dv1), abs(dv2) * body[d, B_RADIUS])
         for i in range(nw):
             if kap[i, 3] != 0.0:
                 dphi = kap[i, 14] * frac
                 y[3 + i] += dphi
-                big = max(big, abs(dphi) * b[B_RADIUS])
+                big = max(big, abs(dphi) * body[d, B_RADIUS])
         if big <= NEWTON_TOL_M_S and frac == 1.0:  # a cut step is no proof
-            break
-    return sig
+            return sig, 0.0
+    return sig, max(big, NEWTON_TOL_M_S)  # not converged (a cut last step: at least tol)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def se2_log(dx: float, dy: float, dth: float, dt: float) -> tuple[float, float, float]:
     """The constant body twist that moves the identity to (dx, dy, dth) in dt (inverse of
     ``se2_step``)."""
@@ -362,7 +382,7 @@ def se2_log(dx: float, dy: float, dth: float, dt: float) -> tuple[float, float, 
     return vx, vy, a / dt
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, parallel=True)
 def step_robots(
     dt: float,
     poses: np.ndarray,  # (D, 3) world poses at the step start
@@ -388,136 +408,152 @@ def step_robots(
     out_nsub: np.ndarray,  # (D,) sub-steps taken
     out_speed: np.ndarray,  # (D, 2) speed of P at the start and at the end, m/s
     out_braking: np.ndarray,  # (D,) bool: every driven wheel's target is zero
+    out_unconverged: np.ndarray,  # (D,) stages whose Newton iteration did not converge
+    out_residual: np.ndarray,  # (D,) the largest correction such a stage stopped at, m/s
+    iterations: int,  # Newton iterations at most, per stage (NEWTON_ITERATIONS)
 ) -> None:
     n_rob, n_w = poses.shape[0], wheel.shape[1]
     n_reg = regions.shape[0]
-    mu_all = np.zeros((n_rob, n_w))  # scratch, one row per robot
-    dirs_all = np.zeros((n_rob, 2, n_w, 4))
-    ys_all = np.zeros((n_rob, 4, 3 + n_w))
-    ws_all = np.zeros((n_rob, 3, n_w))
-    kap_all = np.zeros((n_rob, n_w, NKAP))
-    for d in prange(n_rob):  # robots are independent: one thread each, same result
-        b = body[d]
-        wh = wheel[d]
-        nw = int(b[B_NW])
-        mu_n = mu_all[d]
-        dirs1, dirs2 = dirs_all[d, 0], dirs_all[d, 1]  # at the first stage and at the end
-        y0, y1, y2, a = ys_all[d, 0], ys_all[d, 1], ys_all[d, 2], ys_all[d, 3]
-        tau1, tau2, slip = ws_all[d, 0], ws_all[d, 1], ws_all[d, 2]
-        kap = kap_all[d]
-        out_speed[d, 0] = math.hypot(vel[d, 0], vel[d, 1])
-        braking = True
-        for i in range(nw):
-            if wh[i, W_DRIVEN] > 0.5 and abs(target[d, i]) > 1e-12:
-                braking = False
-        out_braking[d] = braking
-        if freeze[d]:
-            vel[d, :] = 0.0
-            phi[d, :] = 0.0
-            delta_rate[d] = 0.0
-        x0, y0p, th0 = poses[d, 0], poses[d, 1], poses[d, 2]
-        c0, s0 = math.cos(th0), math.sin(th0)
-        for i in range(nw):
-            wx = x0 + c0 * wh[i, W_PX] - s0 * wh[i, W_PY]
-            wy = y0p + s0 * wh[i, W_PX] + c0 * wh[i, W_PY]
-            mu = floor_mu
-            for k in range(n_reg):
-                if regions[k, 0] <= wx < regions[k, 2] and regions[k, 1] <= wy < regions[k, 3]:
-                    mu = regions[k, 4]
-            mu_n[i] = mu * wh[i, W_NORMAL]
-        n_sub, levels = substep_count(b, dt)
-        cx, cy = b[B_CX], b[B_CY]
-        lever = b[B_LEVER]
-        steered = b[B_STEER] > 0.5
-        dl, dr = delta[d], delta_rate[d]
-        set_directions(wh, nw, dl, b[B_WHEELBASE], dirs1)
-        set_directions(wh, nw, dl, b[B_WHEELBASE], dirs2)
-        # the state at the centre of mass
-        y2[0], y2[1], y2[2] = vel[d, 0] - vel[d, 2] * cy, vel[d, 1] + vel[d, 2] * cx, vel[d, 2]
-        for i in range(nw):
-            y2[3 + i] = phi[d, i]
-        for i in range(n_w):
-            out_angle[d, i] = 0.0
-            out_work[d, i] = 0.0
-            out_torque[d, i] = 0.0
-            out_slip[d, i] = 0.0
-        rx, ry, rth = 0.0, 0.0, 0.0
-        cr, sr = 1.0, 0.0  # rotation of the body since the step start
-        sig0 = -1  # the regime at the sub-step's start (unknown at first)
-        taken = 0
-        ticks = 1 << levels  # a base sub-step in the finest sub-steps
-        # new targets (the rim speed by more than ERROR_TOL_M_S) start a transient that the
-        # error estimate misses (the contacts settle in milliseconds): the step
-        # begins with the shortest sub-step and doubles it on the dyadic grid from there
-        jump = freeze[d]
-        for i in range(nw):
-            jump = jump or b[B_RADIUS] * abs(target[d, i] - last_target[d, i]) > ERROR_TOL_M_S
-            last_target[d, i] = target[d, i]
-        for base in range(n_sub):
-            level, pos = (levels if jump and base == 0 else 0), 0
-            while pos < ticks:
-                h = dt / n_sub / (1 << level)
-                gh = GAMMA * h
-                y0[:] = y2
-                dl0, dr0 = dl, dr
-                if steered:  # the servo to the first stage's time, then to the end
-                    dl, dr = servo(b, dl, dr, delta_target[d], gh)
-                    set_directions(wh, nw, dl, b[B_WHEELBASE], dirs1)
-                    dl, dr = servo(b, dl, dr, delta_target[d], h - gh)
-                    set_directions(wh, nw, dl, b[B_WHEELBASE], dirs2)
-                a[:] = y0
-                y1[:] = y0
-                sig1 = solve_stage(b, wh, mu_n, dirs1, target[d], gh, a, y1, tau1, slip, kap)
-                # second stage: a = y0 + (1 - gamma) h f(Y1), f(Y1) = (Y1 - y0) / (gamma h)
-                for k in range(3 + nw):
-                    a[k] = y0[k] + (1.0 - GAMMA) / GAMMA * (y1[k] - y0[k])
-                for k in range(3 + nw):  # first guess: f(Y2) = f(Y1)
-                    y2[k] = a[k] + y1[k] - y0[k]
-                sig2 = solve_stage(b, wh, mu_n, dirs2, target[d], gh, a, y2, tau2, slip, kap)
-                # the local error's estimate: gamma h |f(Y2) - f(Y1)|, velocities in m/s
-                est = 0.0
-                for k in range(3 + nw):
-                    e = abs(y2[k] - a[k] - (y1[k] - y0[k]))
-                    est = max(est, e * (1.0 if k < 2 else (lever if k == 2 else b[B_RADIUS])))
-                kink = sig1 != sig2 or (sig0 >= 0 and sig0 != sig1)
-                if level < levels and (kink or est > ERROR_TOL_M_S):
-                    # a kink of the friction law or a torque limit inside: halve the step
-                    y2[:] = y0
-                    dl, dr = dl0, dr0
-                    level += 1
-                    continue
-                sig0 = sig2
-                taken += 1
-                pos += 1 << (levels - level)
-                while level > 0 and pos % (1 << (levels - level + 1)) == 0:
-                    level -= 1  # back to longer steps on their grid
-                # the pose: exactly on SE(2) with the stages' twists at P, weighted like f
-                vx = (1.0 - GAMMA) * (y1[0] + y1[2] * cy) + GAMMA * (y2[0] + y2[2] * cy)
-                vy = (1.0 - GAMMA) * (y1[1] - y1[2] * cx) + GAMMA * (y2[1] - y2[2] * cx)
-                rot = ((1.0 - GAMMA) * y1[2] + GAMMA * y2[2]) * h
-                mx, my = vx * h, vy * h
-                sin_a, cos_a = math.sin(rot), math.cos(rot)
-                sinc = 1.0 - rot * rot / 6.0 if abs(rot) < 1e-6 else sin_a / rot
-                cosc = sinc * sin_a / (1.0 + cos_a)  # (1 - cos a) / a without cancellation
-                dx, dy = mx * sinc - my * cosc, mx * cosc + my * sinc
-                rx += cr * dx - sr * dy
-                ry += sr * dx + cr * dy
-                cr, sr = cr * cos_a - sr * sin_a, sr * cos_a + cr * sin_a
-                rth += rot
-                for i in range(nw):
-                    p1, p2 = y1[3 + i], y2[3 + i]
-                    out_angle[d, i] += h * ((1.0 - GAMMA) * p1 + GAMMA * p2)
-                    out_work[d, i] += h * ((1.0 - GAMMA) * tau1[i] * p1 + GAMMA * tau2[i] * p2)
-        for i in range(nw):
-            phi[d, i] = y2[3 + i]
-            out_torque[d, i] = tau2[i]
-            out_slip[d, i] = slip[i]
-        w = y2[2]
-        vel[d, 0], vel[d, 1], vel[d, 2] = y2[0] + w * cy, y2[1] - w * cx, w
-        out_speed[d, 1] = math.hypot(vel[d, 0], vel[d, 1])
-        for j in range(steer_cols.shape[1]):
-            c = steer_cols[d, j]
-            out_steer[d, j] = 0.0 if c < 0 else wheel_angle(wh[c], dl, b[B_WHEELBASE])
-        delta[d], delta_rate[d] = dl, dr
-        out_twist[d, 0], out_twist[d, 1], out_twist[d, 2] = se2_log(rx, ry, rth, dt)
-        out_nsub[d] = taken
+    # scratch: one set per chunk of robots (a few chunks a thread), reused robot after robot
+    n_chunk = min(n_rob, CHUNKS)
+    for c in prange(n_chunk):  # robots are independent: any split gives the same result
+        mu_n = np.empty(n_w)  # mu N under each wheel
+        dirs1, dirs2 = np.empty((n_w, 4)), np.empty((n_w, 4))  # at the first stage, the end
+        y0, y1, y2, a = np.empty(3 + n_w), np.empty(3 + n_w), np.empty(3 + n_w), np.empty(3 + n_w)
+        tau1, tau2, slip = np.empty(n_w), np.empty(n_w), np.empty(n_w)
+        kap = np.empty((n_w, NKAP))
+        for d in range(c * n_rob // n_chunk, (c + 1) * n_rob // n_chunk):
+            nw = int(body[d, B_NW])
+            out_speed[d, 0] = math.sqrt(vel[d, 0] ** 2 + vel[d, 1] ** 2)
+            braking = True
+            for i in range(nw):
+                if wheel[d, i, W_DRIVEN] > 0.5 and abs(target[d, i]) > 1e-12:
+                    braking = False
+            out_braking[d] = braking
+            if freeze[d]:
+                vel[d, :] = 0.0
+                phi[d, :] = 0.0
+                delta_rate[d] = 0.0
+            x0, y0p, th0 = poses[d, 0], poses[d, 1], poses[d, 2]
+            c0, s0 = math.cos(th0), math.sin(th0)
+            for i in range(nw):
+                wx = x0 + c0 * wheel[d, i, W_PX] - s0 * wheel[d, i, W_PY]
+                wy = y0p + s0 * wheel[d, i, W_PX] + c0 * wheel[d, i, W_PY]
+                mu = floor_mu
+                for k in range(n_reg):
+                    if regions[k, 0] <= wx < regions[k, 2] and regions[k, 1] <= wy < regions[k, 3]:
+                        mu = regions[k, 4]
+                mu_n[i] = mu * wheel[d, i, W_NORMAL]
+            n_sub, levels = substep_count(body, d, dt)
+            cx, cy = body[d, B_CX], body[d, B_CY]
+            lever = body[d, B_LEVER]
+            steered = body[d, B_STEER] > 0.5
+            dl, dr = delta[d], delta_rate[d]
+            set_directions(wheel, d, nw, dl, body[d, B_WHEELBASE], dirs1)
+            set_directions(wheel, d, nw, dl, body[d, B_WHEELBASE], dirs2)
+            # the state at the centre of mass
+            y2[0], y2[1], y2[2] = vel[d, 0] - vel[d, 2] * cy, vel[d, 1] + vel[d, 2] * cx, vel[d, 2]
+            for i in range(nw):
+                y2[3 + i] = phi[d, i]
+            for i in range(n_w):
+                out_angle[d, i] = 0.0
+                out_work[d, i] = 0.0
+                out_torque[d, i] = 0.0
+                out_slip[d, i] = 0.0
+            rx, ry, rth = 0.0, 0.0, 0.0
+            cr, sr = 1.0, 0.0  # rotation of the body since the step start
+            sig0 = -1  # the regime at the sub-step's start (unknown at first)
+            taken = 0
+            unconverged, residual = 0, 0.0
+            ticks = 1 << levels  # a base sub-step in the finest sub-steps
+            # new targets (the rim speed by more than ERROR_TOL_M_S) start a transient that the
+            # error estimate misses (the contacts settle in milliseconds): the step
+            # begins with the shortest sub-step and doubles it on the dyadic grid from there
+            jump = freeze[d]
+            for i in range(nw):
+                jump = (
+                    jump
+                    or body[d, B_RADIUS] * abs(target[d, i] - last_target[d, i]) > ERROR_TOL_M_S
+                )
+                last_target[d, i] = target[d, i]
+            for base in range(n_sub):
+                level, pos = (levels if jump and base == 0 else 0), 0
+                while pos < ticks:
+                    h = dt / n_sub / (1 << level)
+                    gh = GAMMA * h
+                    y0[:] = y2
+                    dl0, dr0 = dl, dr
+                    if steered:  # the servo to the first stage's time, then to the end
+                        dl, dr = servo(body, d, dl, dr, delta_target[d], gh)
+                        set_directions(wheel, d, nw, dl, body[d, B_WHEELBASE], dirs1)
+                        dl, dr = servo(body, d, dl, dr, delta_target[d], h - gh)
+                        set_directions(wheel, d, nw, dl, body[d, B_WHEELBASE], dirs2)
+                    a[:] = y0
+                    y1[:] = y0
+                    sig1, res1 = solve_stage(
+                        body, wheel, d, mu_n, dirs1, target, gh, a, y1, tau1, slip, kap, iterations
+                    )
+                    # second stage: a = y0 + (1 - gamma) h f(Y1), f(Y1) = (Y1 - y0) / (gamma h)
+                    for k in range(3 + nw):
+                        a[k] = y0[k] + (1.0 - GAMMA) / GAMMA * (y1[k] - y0[k])
+                    for k in range(3 + nw):  # first guess: f(Y2) = f(Y1)
+                        y2[k] = a[k] + y1[k] - y0[k]
+                    sig2, res2 = solve_stage(
+                        body, wheel, d, mu_n, dirs2, target, gh, a, y2, tau2, slip, kap, iterations
+                    )
+                    # the local error's estimate: gamma h |f(Y2) - f(Y1)|, velocities in m/s
+                    est = 0.0
+                    for k in range(3 + nw):
+                        e = abs(y2[k] - a[k] - (y1[k] - y0[k]))
+                        est = max(
+                            est, e * (1.0 if k < 2 else (lever if k == 2 else body[d, B_RADIUS]))
+                        )
+                    kink = sig1 != sig2 or (sig0 >= 0 and sig0 != sig1)
+                    if level < levels and (kink or est > ERROR_TOL_M_S or res1 > 0 or res2 > 0):
+                        # a kink of the friction law or a torque limit inside: halve the step
+                        y2[:] = y0
+                        dl, dr = dl0, dr0
+                        level += 1
+                        continue
+                    sig0 = sig2
+                    taken += 1
+                    for res in (res1, res2):  # counted in the sub-steps kept only
+                        if res > 0.0:
+                            unconverged += 1
+                            residual = max(residual, res)
+                    pos += 1 << (levels - level)
+                    while level > 0 and pos % (1 << (levels - level + 1)) == 0:
+                        level -= 1  # back to longer steps on their grid
+                    # the pose: exactly on SE(2) with the stages' twists at P, weighted like f
+                    vx = (1.0 - GAMMA) * (y1[0] + y1[2] * cy) + GAMMA * (y2[0] + y2[2] * cy)
+                    vy = (1.0 - GAMMA) * (y1[1] - y1[2] * cx) + GAMMA * (y2[1] - y2[2] * cx)
+                    rot = ((1.0 - GAMMA) * y1[2] + GAMMA * y2[2]) * h
+                    mx, my = vx * h, vy * h
+                    sin_a, cos_a = math.sin(rot), math.cos(rot)
+                    sinc = 1.0 - rot * rot / 6.0 if abs(rot) < 1e-6 else sin_a / rot
+                    cosc = sinc * sin_a / (1.0 + cos_a)  # (1 - cos a) / a without cancellation
+                    dx, dy = mx * sinc - my * cosc, mx * cosc + my * sinc
+                    rx += cr * dx - sr * dy
+                    ry += sr * dx + cr * dy
+                    cr, sr = cr * cos_a - sr * sin_a, sr * cos_a + cr * sin_a
+                    rth += rot
+                    for i in range(nw):
+                        p1, p2 = y1[3 + i], y2[3 + i]
+                        out_angle[d, i] += h * ((1.0 - GAMMA) * p1 + GAMMA * p2)
+                        out_work[d, i] += h * ((1.0 - GAMMA) * tau1[i] * p1 + GAMMA * tau2[i] * p2)
+            for i in range(nw):
+                phi[d, i] = y2[3 + i]
+                out_torque[d, i] = tau2[i]
+                out_slip[d, i] = slip[i]
+            w = y2[2]
+            vel[d, 0], vel[d, 1], vel[d, 2] = y2[0] + w * cy, y2[1] - w * cx, w
+            out_speed[d, 1] = math.sqrt(vel[d, 0] ** 2 + vel[d, 1] ** 2)
+            for j in range(steer_cols.shape[1]):
+                c = steer_cols[d, j]
+                out_steer[d, j] = (
+                    0.0 if c < 0 else wheel_angle(wheel, d, c, dl, body[d, B_WHEELBASE])
+                )
+            delta[d], delta_rate[d] = dl, dr
+            out_twist[d, 0], out_twist[d, 1], out_twist[d, 2] = se2_log(rx, ry, rth, dt)
+            out_nsub[d] = taken
+            out_unconverged[d], out_residual[d] = unconverged, residual

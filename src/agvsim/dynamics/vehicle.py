@@ -143,6 +143,9 @@ class Dynamics:
             self.steer_cols[d, : len(cols)] = cols
         self.loads = [r.dynamics.load for r in self.robots]  # type: ignore[union-attr]
         self.brakes = BrakeMonitor(n)
+        # at most this many Newton iterations per implicit stage (a diagnostic knob: fewer
+        # make non-convergence, reported per robot, happen)
+        self.newton_iterations = K.NEWTON_ITERATIONS
         self.reset(np.zeros(n))
 
     def _fill(self, d: int, robot: RobotSpec, load: LoadSpec | None) -> None:
@@ -242,6 +245,11 @@ class Dynamics:
         self.energy_j = np.zeros((n, w))  # motor work since reset
         self.brakes = BrakeMonitor(n)
         self.last_substeps = np.zeros(n, dtype=np.int64)
+        # implicit stages whose Newton iteration stopped unconverged, since reset: how many,
+        # the first (step start time, residual in m/s) and the largest residual, per robot
+        self.newton_unconverged = np.zeros(n, dtype=np.int64)
+        self.newton_first: list[tuple[float, float] | None] = [None] * n
+        self.newton_max_residual_m_s = np.zeros(n)
         for d, r in enumerate(self.robots):
             if self.loads[d] != r.dynamics.load:  # type: ignore[union-attr]
                 self._fill(d, r, None)
@@ -269,6 +277,8 @@ class Dynamics:
         nsub = np.empty(n, dtype=np.int64)
         speed = np.empty((n, 2))
         braking = np.empty(n, dtype=np.bool_)
+        unconverged = np.empty(n, dtype=np.int64)
+        residual = np.empty(n)
         vel0 = self.vel.copy()
         K.step_robots(
             float(dt),
@@ -295,9 +305,13 @@ class Dynamics:
             nsub,
             speed,
             braking,
+            unconverged,
+            residual,
+            self.newton_iterations,
         )
         self.energy_j += work
         self.last_substeps = nsub
+        self._count_unconverged(unconverged, residual, t_s)
         self.brakes.update(t_s, poses, twist, dt, speed[:, 0], speed[:, 1], braking, vel0)
         for d in self.brakes.started:  # the closed form as loaded and on the floor now
             # a stop may begin and end in one step: it is then the last event
@@ -311,6 +325,16 @@ class Dynamics:
         work /= dt
         return DynamicsStep(twist, angle, self.delta.copy(), steer_angles, torque, slip, work, nsub)
 
+    def _count_unconverged(self, count: np.ndarray, residual: np.ndarray, t_s: float) -> None:
+        """Add one step's unconverged stages (per robot, with their largest residual)."""
+        if not count.any():
+            return
+        self.newton_unconverged += count
+        np.maximum(self.newton_max_residual_m_s, residual, out=self.newton_max_residual_m_s)
+        for d in np.flatnonzero(count):
+            if self.newton_first[d] is None:
+                self.newton_first[d] = (float(t_s), float(residual[d]))
+
     def _mu_under(self, d: int, pose: np.ndarray) -> np.ndarray:
         """Friction under each wheel of row d at a world pose."""
         nw = int(self.body[d, K.B_NW])
@@ -318,9 +342,19 @@ class Dynamics:
         c, s = np.cos(pose[2]), np.sin(pose[2])
         return self.floor.mu_at(pose[0] + c * px - s * py, pose[1] + s * px + c * py)
 
+    def _newton_summary(self, d: int) -> dict:
+        first = self.newton_first[d]
+        return {
+            "stages": int(self.newton_unconverged[d]),
+            "first_t_s": None if first is None else round(first[0], 6),
+            "first_residual_m_s": None if first is None else first[1],
+            "max_residual_m_s": float(self.newton_max_residual_m_s[d]),
+        }
+
     def summary(self) -> list[dict]:
-        """Per dynamic robot: mass, energy per wheel and the braking events measured against
-        the closed form v^2 / (2 a_max) (docs/dynamics.md)."""
+        """Per dynamic robot: mass, energy per wheel, the braking events measured against
+        the closed form v^2 / (2 a_max) and the implicit stages whose Newton iteration did
+        not converge (docs/dynamics.md)."""
         out = []
         for d, r in enumerate(self.robots):
             events = []
@@ -344,6 +378,25 @@ class Dynamics:
                     "load_kg": round(self.loads[d].mass_kg, 6),
                     "motor_energy_j": [round(float(e), 3) for e in self.energy_j[d]],
                     "stops": events,
+                    "newton_unconverged": self._newton_summary(d),
                 }
             )
         return out
+
+
+def newton_warning(summary: list[dict]) -> str | None:
+    """The one warning line of a run whose Newton iterations did not all converge, from
+    ``Dynamics.summary()`` (or summary.json's ``dynamics``): the robot and time of the
+    earliest such stage with its residual, and the totals; None when every stage converged."""
+    hit = [r for r in summary if r["newton_unconverged"]["stages"] > 0]
+    if not hit:
+        return None
+    first = min(hit, key=lambda r: r["newton_unconverged"]["first_t_s"])
+    nu = first["newton_unconverged"]
+    total = sum(r["newton_unconverged"]["stages"] for r in hit)
+    return (
+        f"dynamics: Newton's method did not converge for robot {first['name']!r} in the step "
+        f"from t = {nu['first_t_s']:g} s (residual {nu['first_residual_m_s']:.3g} m/s); "
+        f"{total} implicit stage(s) of {len(hit)} robot(s) in all, see summary.json "
+        "dynamics[].newton_unconverged (docs/dynamics.md)"
+    )

@@ -21,6 +21,8 @@ def plot_run(sim, trajectories: dict[str, np.ndarray], path: Path, title: str = 
     for b in sim.world.boxes:
         ax.add_patch(Polygon(_corners(b), closed=True, color="0.35"))
     _draw_guidance(ax, sim.world)
+    if sim.dynamics is not None:  # friction only acts on robots with dynamics
+        _draw_floor(ax, sim.world.floor)
     st = sim.state
     fps = sim.footprints(st.poses)
     for i, robot in enumerate(sim.robots):
@@ -77,6 +79,27 @@ def _draw_guidance(ax: Axes, world) -> None:
     refl = getattr(world, "reflectors", None)
     if refl is not None and len(refl.xy):
         ax.plot(*refl.xy.T, "D", color="gold", mec="k", ms=5, label="reflectors")
+
+
+MAX_FLOOR_LABELS = 20  # more friction regions (a painted floor) are drawn without labels
+
+
+def _draw_floor(ax: Axes, floor) -> None:
+    """The floor's friction regions (agvsim.dynamics), shaded the darker the more slippery
+    than the floor around them, each labelled with its mu while there are few."""
+    from matplotlib.patches import Rectangle
+
+    for r in floor.regions:
+        slip = min(max(1.0 - r.mu / max(floor.mu, 1e-9), 0.0), 1.0)
+        w, h = r.x_max_m - r.x_min_m, r.y_max_m - r.y_min_m
+        ax.add_patch(
+            Rectangle((r.x_min_m, r.y_min_m), w, h, fc="tab:cyan", alpha=0.12 + 0.3 * slip, lw=0)
+        )
+        if len(floor.regions) <= MAX_FLOOR_LABELS:
+            ax.text(
+                r.x_min_m + w / 2, r.y_min_m + h / 2, f"mu {r.mu:g}",
+                ha="center", va="center", fontsize=7, color="tab:blue",
+            )  # fmt: skip
 
 
 def map_figure(grid, width_in: float, dpi: int, wall_vmax: float) -> tuple[Figure, Axes]:

@@ -1,5 +1,6 @@
-"""``wheels.png``: wheel torque and slip over time of the robots with dynamics, read back from
-``trajectory.csv`` (written next to ``plot.png`` when a run has such robots)."""
+"""``wheels.png``: wheel torque and slip over time of the robots with dynamics, and how far
+their wheel odometry has drifted from the true pose, read back from ``trajectory.csv``
+(written next to ``plot.png`` when a run has such robots)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ MAX_ROBOTS = 6  # rows of the figure; further robots are left out (their data st
 
 def read_wheels(csv_path: Path, robots: dict[str, list[str]]) -> dict[str, dict[str, np.ndarray]]:
     """Per robot of ``robots`` (name -> wheel names): ``t`` (T,), ``torque_nm`` and
-    ``slip_m_s`` (T, W) from a trajectory.csv with the dynamics columns."""
+    ``slip_m_s`` (T, W) and ``odometry_error_m`` (T,), the distance from the odometry's
+    position to the true one, from a trajectory.csv with the dynamics columns."""
     rows: dict[str, list[list[float]]] = {name: [] for name in robots}
     with open(csv_path, encoding="utf-8", newline="") as f:
         reader = csv.reader(f)
@@ -23,6 +25,7 @@ def read_wheels(csv_path: Path, robots: dict[str, list[str]]) -> dict[str, dict[
         col_t, col_robot = header.index("t"), header.index("robot")
         torque = [header.index(f"wheel{k + 1}_torque_nm") for k in range(4)]
         slip = [header.index(f"wheel{k + 1}_slip_m_s") for k in range(4)]
+        pos = [header.index(c) for c in ("x", "y", "odom_x", "odom_y")]
         for r in reader:
             name = r[col_robot]
             if name in rows:
@@ -31,24 +34,32 @@ def read_wheels(csv_path: Path, robots: dict[str, list[str]]) -> dict[str, dict[
                     [float(r[col_t])]
                     + [float(r[c]) for c in torque[:n]]
                     + [float(r[c]) for c in slip[:n]]
+                    + [float(r[c]) for c in pos]
                 )
     out = {}
     for name, data in rows.items():
-        a = np.array(data, dtype=np.float64).reshape(-1, 1 + 2 * len(robots[name]))
         n = len(robots[name])
-        out[name] = {"t": a[:, 0], "torque_nm": a[:, 1 : 1 + n], "slip_m_s": a[:, 1 + n :]}
+        a = np.array(data, dtype=np.float64).reshape(-1, 5 + 2 * n)
+        x, y, ox, oy = a[:, -4:].T
+        out[name] = {
+            "t": a[:, 0],
+            "torque_nm": a[:, 1 : 1 + n],
+            "slip_m_s": a[:, 1 + n : 1 + 2 * n],
+            "odometry_error_m": np.hypot(ox - x, oy - y),
+        }
     return out
 
 
 def plot_wheels(
     csv_path: Path, png_path: Path, robots: dict[str, list[str]], title: str = ""
 ) -> None:
-    """Torque (left) and slip speed (right) of each wheel against time, one row per robot."""
+    """Torque and slip speed of each wheel and the odometry's error against time, one row
+    per robot."""
     import matplotlib.pyplot as plt
 
     names = list(robots)[:MAX_ROBOTS]
     data = read_wheels(csv_path, {n: robots[n] for n in names})
-    fig, axes = plt.subplots(len(names), 2, figsize=(10, 2.2 * len(names) + 0.6), squeeze=False)
+    fig, axes = plt.subplots(len(names), 3, figsize=(13, 2.2 * len(names) + 0.6), squeeze=False)
     for row, name in enumerate(names):
         d = data[name]
         for k, wheel in enumerate(robots[name]):
@@ -57,8 +68,10 @@ def plot_wheels(
         axes[row, 0].set_ylabel(f"{name}\ntorque [N m]")
         axes[row, 1].set_ylabel("slip [m/s]")
         axes[row, 1].legend(loc="upper right", fontsize=7, frameon=False)
-    axes[-1, 0].set_xlabel("t [s]")
-    axes[-1, 1].set_xlabel("t [s]")
-    fig.suptitle(title or "wheel torque and slip")
+        axes[row, 2].plot(d["t"], d["odometry_error_m"], lw=1, color="k")
+        axes[row, 2].set_ylabel("odometry error [m]")
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    fig.suptitle(title or "wheel torque, slip and odometry drift")
     fig.tight_layout()
     save_figure(fig, png_path)
