@@ -50,6 +50,7 @@ class Agv:
     stalled: bool = False
     replan: bool = False  # its route crosses a broken vehicle: re-plan as soon as one fits
     retimed_s: float = -1e9  # when it was last re-planned for being late
+    turn_radius_m: float = 0.0  # car-like: its minimum turning radius (0: turns on the spot)
 
     @property
     def battery_pct(self) -> float:
@@ -60,6 +61,12 @@ class Agv:
     def charging(self) -> bool:
         bs = (self.state or {}).get("batteryState") or (self.state or {}).get("powerSupply") or {}
         return bool(bs.get("charging", False))
+
+    @property
+    def heading_rad(self) -> float | None:
+        """Its reported heading (None before its first state with a position)."""
+        pos = (self.state or {}).get("agvPosition") or (self.state or {}).get("mobileRobotPosition")
+        return float(pos["theta"]) if pos and "theta" in pos else None
 
     @property
     def decision_node(self) -> str:

@@ -6,6 +6,14 @@ speed (trajectories: the sampled NURBS length). ``astar`` is a small A* over a b
 route planner's heuristic, the dispatcher's cost) come from SciPy's compiled Dijkstra
 (``scipy.sparse.csgraph``) on the reversed graph: on a 5,000-node layout a pure-Python
 Dijkstra took ~0.1 s a goal.
+
+A car-like vehicle (``turn_radius_m`` > 0: Ackermann, a tricycle with less than 90 deg of
+steering lock) cannot turn round on a node nor take a sharp corner: ``exits(arc)`` lists the
+arcs it can drive on after arriving by ``arc``. A turn of angle theta, driven as a circular arc
+of radius R tangent to both edges, starts R tan(theta / 2) before the node and ends as far
+after it; it is allowed when that fits in half of each edge (the other half is kept for the
+turn at the edge's other end). A U-turn (theta = pi) never fits: such a vehicle turns round
+only by driving a loop of the layout.
 """
 
 from __future__ import annotations
@@ -51,18 +59,49 @@ class Arc:
     end: str
     length_m: float
     time_s: float
+    heading_start_rad: float = 0.0  # the direction of travel leaving ``start``
+    heading_end_rad: float = 0.0  # ... and arriving at ``end``
+
+
+def turn_fits(turn_radius_m: float, heading_in_rad: float, arc_out: Arc, room_in_m: float) -> bool:
+    """Can a vehicle of minimum turning radius ``turn_radius_m`` arriving at ``arc_out.start``
+    heading ``heading_in_rad`` drive on along ``arc_out``? ``room_in_m``: the length of the edge
+    it arrives by (its half is the room before the node)."""
+    if turn_radius_m <= 0:
+        return True
+    theta = abs(math.remainder(arc_out.heading_start_rad - heading_in_rad, math.tau))
+    if theta > math.radians(170.0):
+        return False
+    need_m = turn_radius_m * math.tan(theta / 2)
+    return need_m <= 0.5 * min(room_in_m, arc_out.length_m) + 1e-9
+
+
+def _headings(pts: list[tuple[float, float]]) -> tuple[float, float]:
+    (ax, ay), (bx, by) = pts[0], pts[1]
+    (cx, cy), (dx, dy) = pts[-2], pts[-1]
+    return math.atan2(by - ay, bx - ax), math.atan2(dy - cy, dx - cx)
 
 
 class RoadGraph:
-    """Directed arcs of ``layout`` that ``vehicle_type`` may use (every arc when None)."""
+    """Directed arcs of ``layout`` that ``vehicle_type`` may use (every arc when None);
+    ``turn_radius_m``: the vehicle's minimum turning radius (0: it turns on the spot)."""
 
     CACHED_GOALS = 256  # shortest-time tables kept (stations and homes repeat)
 
-    def __init__(self, layout: Layout, vehicle_type: str | None, max_speed_m_s: float):
+    def __init__(
+        self,
+        layout: Layout,
+        vehicle_type: str | None,
+        max_speed_m_s: float,
+        turn_radius_m: float = 0.0,
+    ):
         self._times: OrderedDict[str, Times] = OrderedDict()
         if max_speed_m_s <= 0:
             raise ValueError(f"max_speed_m_s {max_speed_m_s}: must be > 0")
+        if not turn_radius_m >= 0:
+            raise ValueError(f"turn_radius_m {turn_radius_m}: must be >= 0")
         self.layout = layout
+        self.turn_radius_m = turn_radius_m
         self.out: dict[str, list[Arc]] = {n: [] for n in layout.nodes}
         self.into: dict[str, list[Arc]] = {n: [] for n in layout.nodes}
         for e in sorted(layout.edges.values(), key=lambda e: e.edge_id):
@@ -70,13 +109,14 @@ class RoadGraph:
             if vehicle_type is not None and props is None:
                 continue
             if props is not None and props.trajectory is not None:
-                pts = props.trajectory.sample(64)
-                length = float(sum(math.dist(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)))
+                pts = [(float(x), float(y)) for x, y in props.trajectory.sample(64)]
             else:
-                length = math.dist(layout.node_xy(e.start), layout.node_xy(e.end))
+                pts = [layout.node_xy(e.start), layout.node_xy(e.end)]
+            length = float(sum(math.dist(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)))
             limit = props.max_speed_m_s if props is not None else None
             speed = max_speed_m_s if limit is None else min(limit, max_speed_m_s)
-            arc = Arc(e.edge_id, e.start, e.end, length, length / speed)
+            h0, h1 = _headings(pts)
+            arc = Arc(e.edge_id, e.start, e.end, length, length / speed, h0, h1)
             self.out[e.start].append(arc)
             self.into[e.end].append(arc)
         self.ids = sorted(layout.nodes)
@@ -92,6 +132,36 @@ class RoadGraph:
         self._reversed = csr_matrix(
             (np.array(list(fastest.values()), dtype=np.float64), (rows, cols)), shape=(n, n)
         )
+
+        # car-like: the arcs it can take after arriving by each arc
+        self._exits: dict[Arc, list[Arc]] = {}
+        if turn_radius_m > 0:
+            for arcs in self.out.values():
+                for a in arcs:
+                    self._exits[a] = [
+                        b
+                        for b in self.out[a.end]
+                        if turn_fits(turn_radius_m, a.heading_end_rad, b, a.length_m)
+                    ]
+
+    @property
+    def car_like(self) -> bool:
+        return self.turn_radius_m > 0
+
+    def exits(
+        self, arrived_by: Arc | None, node: str, heading_rad: float | None = None
+    ) -> list[Arc]:
+        """The arcs out of ``node`` after arriving by ``arrived_by``; standing there (None),
+        facing ``heading_rad`` (None: any way, as a vehicle that turns on the spot)."""
+        if not self.car_like:
+            return self.out[node]
+        if arrived_by is not None:
+            return self._exits[arrived_by]
+        if heading_rad is None:
+            return self.out[node]
+        return [
+            b for b in self.out[node] if turn_fits(self.turn_radius_m, heading_rad, b, b.length_m)
+        ]
 
     def arc(self, start: str, end: str) -> Arc:
         for a in self.out[start]:

@@ -58,13 +58,18 @@ class Master:
         cfg: MasterConfig,
         transports: list[Transport] | None = None,
         epoch: datetime | None = None,
+        turn_radius_m: dict[str, float] | None = None,
     ):
+        """``turn_radius_m``: the minimum turning radius of each car-like vehicle by serial
+        (a vehicle not named turns on the spot); the VDA 5050 factsheet has no field for it,
+        so the runners read it from the vehicles' kinematic models."""
         self.layout, self.cfg = layout, cfg
+        self.turn_radius_m = dict(turn_radius_m or {})
         self.epoch = epoch or datetime(2026, 1, 1, tzinfo=UTC)
         self.table = Reservations(cfg.margin_s)
         self.policy = POLICIES[cfg.dispatch]
         self.agvs: dict[str, Agv] = {}
-        self._graphs: dict[tuple[str | None, float], RoadGraph] = {}
+        self._graphs: dict[tuple[str | None, float, float], RoadGraph] = {}
         self.upcoming = sorted(transports or [], key=lambda x: (x.created_s, x.transport_id))
         self.pending: list[Transport] = []
         self.transports: list[Transport] = list(self.upcoming)
@@ -87,6 +92,7 @@ class Master:
                 str(msg.get("manufacturer", "")),
                 dialect.version,
                 Stamper(dialect, str(msg.get("manufacturer", "")), serial, self.epoch),
+                turn_radius_m=self.turn_radius_m.get(serial, 0.0),
             )
             self.agvs = dict(sorted({**self.agvs, serial: agv}.items()))
         if topic == "factsheet":
@@ -107,11 +113,11 @@ class Master:
 
     # ------------------------------------------------------------------ helpers
     def graph(self, agv: Agv) -> RoadGraph:
-        key = (agv.vehicle_type, agv.speed_m_s)
+        key = (agv.vehicle_type, agv.speed_m_s, agv.turn_radius_m)
         if key not in self._graphs:
             types = self.layout.vehicle_types
             vt = agv.vehicle_type if agv.vehicle_type in types else None
-            self._graphs[key] = RoadGraph(self.layout, vt, agv.speed_m_s)
+            self._graphs[key] = RoadGraph(self.layout, vt, agv.speed_m_s, agv.turn_radius_m)
         return self._graphs[key]
 
     def static_time(self, agv: Agv, a: str, b: str) -> float:
@@ -140,10 +146,14 @@ class Master:
         for v in old:
             self.table.remove(v)
         t0 = max(t_s, start.arrive_s)
+        graph = self.graph(agv)
+        # how the vehicle reaches its decision point: by the route's arc into it, or it
+        # stands there facing its reported heading (what a car-like can turn to depends on it)
+        arrived_by = graph.arc(agv.route[g - 1].node, start.node) if g > 0 else None
         w0 = time.perf_counter()
         try:
             steps = plan_route(
-                self.graph(agv),
+                graph,
                 self.table,
                 agv.serial,
                 start.node,
@@ -154,6 +164,8 @@ class Master:
                 avoid=frozenset(
                     a.home for a in self.agvs.values() if a is not agv and a.home is not None
                 ),
+                arrived_by=arrived_by,
+                heading_rad=agv.heading_rad,
             )
         except NoRoute:
             for v in old:

@@ -28,7 +28,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from agvsim.master.graph import RoadGraph
+from agvsim.master.graph import Arc, RoadGraph
 
 INF = math.inf
 
@@ -118,14 +118,18 @@ def plan_route(
     stop_at_start: bool = True,
     avoid: frozenset[str] = frozenset(),
     max_expansions: int = 100_000,
+    arrived_by: Arc | None = None,
+    heading_rad: float | None = None,
 ) -> list[Step]:
     """The quickest route from ``start`` (at ``t0_s``) through ``stops`` that fits the gaps
     of ``table``, ending parked on the last stop. The vehicle has held ``start`` since
     ``held_since_s`` (default ``t0_s``): the gap it starts in must cover that too.
     ``stop_at_start`` False: a stop on ``start`` needs leaving and coming back (an order
     update cannot add actions to its first node). ``avoid``: nodes never to enter (other
-    vehicles' parking places: a car-like vehicle cannot dodge into a dead end). Raises
-    NoRoute."""
+    vehicles' parking places). A car-like ``graph`` (a minimum turning radius) plans over
+    (node, the arc it arrived by): only turns its steering lock allows, and it parks only where
+    it can drive off again; ``arrived_by`` is how it reaches ``start`` (None: it stands there,
+    facing ``heading_rad``). Raises NoRoute."""
     if not stops:
         raise ValueError("a route needs at least one stop")
     to_stop = [graph.times_to(s.node) for s in stops]
@@ -138,67 +142,80 @@ def plan_route(
     cache: dict[str, list[tuple[float, float]]] = {}
 
     def gaps(n: str) -> list[tuple[float, float]]:
-        if n not in cache:
-            cache[n] = table.safe_intervals(n, serial)
-        return cache[n]
+        got = cache.get(n)
+        if got is None:
+            got = cache[n] = table.safe_intervals(n, serial)
+        return got
 
+    car = graph.car_like
     held = t0_s if held_since_s is None else min(held_since_s, t0_s)
     i0 = next((i for i, (a, b) in enumerate(gaps(start)) if a <= held and t0_s < b), None)
     if i0 is None:
         raise NoRoute(f"{start} is not free for {serial} at t={t0_s:.1f} s")
-    Key = tuple[str, int, int]
-    best: dict[Key, float] = {(start, i0, 0): t0_s}
-    parent: dict[Key, tuple[Key, float] | None] = {(start, i0, 0): None}
+    a0 = arrived_by if car else None
+    # a state: (node, the arc it arrived by (car-like only), safe interval, stops done)
+    Key = tuple[str, Arc | None, int, int]
+    k0: Key = (start, a0, i0, 0)
+    best: dict[Key, float] = {k0: t0_s}
+    parent: dict[Key, tuple[Key, float] | None] = {k0: None}
     # ties of f (many equally quick ways on a grid; f rounded to the microsecond so that sums
-    # in another order tie too) go to the state furthest along: -g
-    heap: list[tuple[float, float, str, int, int]] = [
-        (round(t0_s + to_stop[0][start] + rest[0], 6), -t0_s, start, i0, 0)
+    # in another order tie too) go to the state furthest along: -g; then by name, push order
+    heap: list[tuple[float, float, str, int, int, int, Key]] = [
+        (round(t0_s + to_stop[0][start] + rest[0], 6), -t0_s, start, i0, 0, 0, k0)
     ]
+    pushed = 1
     closed: set[Key] = set()
     expansions = 0
     goal: Key | None = None
+    last = len(stops) - 1
     while heap:
-        _, neg_a, u, i, k = heapq.heappop(heap)
-        a = -neg_a
-        key = (u, i, k)
+        _, neg_a, *_, key = heapq.heappop(heap)
         if key in closed:
             continue
         closed.add(key)
         expansions += 1
         if expansions > max_expansions:
             break
+        a = -neg_a
+        u, came, i, k = key
         hi = gaps(u)[i][1]
+        exits = graph.exits(came, u, heading_rad) if car else graph.out[u]
         if u == stops[k].node and (stop_at_start or parent[key] is not None):
-            if k == len(stops) - 1:
-                if hi == INF:
+            if k == last:
+                if hi == INF and (exits or not graph.out[u]):
                     goal = key
                     break
             else:
                 a2 = a + stops[k].dwell_s
-                nk = (u, i, k + 1)
+                nk: Key = (u, came, i, k + 1)
                 if a2 < hi and a2 < best.get(nk, INF):
                     best[nk], parent[nk] = a2, (key, -1.0)
                     h = to_stop[k + 1].get(u, INF) + rest[k + 1]
-                    heapq.heappush(heap, (round(a2 + h, 6), -a2, u, i, k + 1))
-        for arc in graph.out[u]:
-            if arc.end in avoid:
+                    heapq.heappush(heap, (round(a2 + h, 6), -a2, u, i, k + 1, pushed, nk))
+                    pushed += 1
+        tk = to_stop[k]
+        for arc in exits:
+            v = arc.end
+            if v in avoid:
                 continue
-            h = to_stop[k].get(arc.end, INF)
+            h = tk.get(v, INF)
             if h == INF:
                 continue
-            for j, (lo, hi2) in enumerate(gaps(arc.end)):
+            for j, (lo, hi2) in enumerate(gaps(v)):
                 if hi2 <= a:
                     continue
-                d = max(a, lo)
+                d = a if a > lo else lo
                 arrive = d + arc.time_s
                 if arrive >= hi:
                     break  # cannot hold u until then (later gaps start later still)
                 if arrive >= hi2:
                     continue
-                nk = (arc.end, j, k)
+                nk = (v, arc if car else None, j, k)
                 if arrive < best.get(nk, INF):
                     best[nk], parent[nk] = arrive, (key, d)
-                    heapq.heappush(heap, (round(arrive + h + rest[k], 6), -arrive, arc.end, j, k))
+                    f = round(arrive + h + rest[k], 6)
+                    heapq.heappush(heap, (f, -arrive, v, j, k, pushed, nk))
+                    pushed += 1
     if goal is None:
         raise NoRoute(
             f"no conflict-free route for {serial} from {start} through "
@@ -216,11 +233,12 @@ def plan_route(
         key_, dep = p
     chain.reverse()
     steps: list[Step] = []
-    for (n, i, k), depart in chain:
+    for key_k, depart in chain:
+        k = key_k[3]
         if steps and steps[-1].depart_s == -1.0:  # stop k - 1 was done on this very node
             steps[-1].stop, steps[-1].depart_s = k - 1, depart
             continue
-        steps.append(Step(n, best[(n, i, k)], depart))
+        steps.append(Step(key_k[0], best[key_k], depart))
     steps[-1].depart_s, steps[-1].stop = INF, len(stops) - 1
     return steps
 
