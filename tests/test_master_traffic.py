@@ -187,12 +187,14 @@ def scenes(draw):
     return w, h, holes, starts, goals, order
 
 
+@pytest.mark.parametrize("weight", [1.0, 1.5])
 @settings(max_examples=150, deadline=None)
 @given(scenes())
-def test_planned_routes_never_overlap_and_always_finish(scene) -> None:
+def test_planned_routes_never_overlap_and_always_finish(weight, scene) -> None:
     """Whatever the layout, starts, goals and delays: routes planned one after the other never
     hold a node at the same planned time, and executing them in dependency order never
-    deadlocks - every vehicle that got a route reaches its goal."""
+    deadlocks - every vehicle that got a route reaches its goal. Weighted A* (weight > 1)
+    finds routes at most ``weight`` times slower than the quickest that fits."""
     w, h, holes, starts, goals, order = scene
     lay = grid(w, h, holes)
     g = RoadGraph(lay, T, 1.0)
@@ -207,10 +209,14 @@ def test_planned_routes_never_overlap_and_always_finish(scene) -> None:
         assert old is not None and old.serial == s
         table.remove(old)
         try:
-            steps = plan_route(g, table, s, node, 0.0, [Stop(goal)], max_expansions=20_000)
+            steps = plan_route(
+                g, table, s, node, 0.0, [Stop(goal)], max_expansions=20_000, weight=weight
+            )
         except NoRoute:
             table.add(old)
             continue
+        quickest = plan_route(g, table, s, node, 0.0, [Stop(goal)], max_expansions=20_000)
+        assert quickest[-1].arrive_s <= steps[-1].arrive_s <= weight * quickest[-1].arrive_s + 1e-9
         assert steps[0].node == node and steps[-1].node == goal
         for a, b in zip(steps, steps[1:], strict=False):
             assert b.node in [arc.end for arc in g.out[a.node]]

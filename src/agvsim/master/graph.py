@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import heapq
 import math
+from array import array
 from collections import OrderedDict
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,12 +36,17 @@ class Times:
     """Shortest times (s) to one goal by node id; ``get`` gives ``default`` (inf) for a node
     that cannot reach it."""
 
-    def __init__(self, index: dict[str, int], times: list[float]):
-        self._index, self._times = index, times
+    def __init__(self, index: dict[str, int], times: np.ndarray):
+        # by node index (RoadGraph.index): a C array of doubles (its items are plain floats,
+        # the planner's look-ups) and a NumPy view of the same memory (the dispatcher's)
+        self._index = index
+        self.by_index = array("d")
+        self.by_index.frombytes(np.ascontiguousarray(times, dtype=np.float64).tobytes())
+        self.array = np.frombuffer(self.by_index, dtype=np.float64)
 
     def get(self, node: str, default: float = math.inf) -> float:
         k = self._index.get(node)
-        t = math.inf if k is None else self._times[k]
+        t = math.inf if k is None else self.by_index[k]
         return default if t == math.inf else t
 
     def __getitem__(self, node: str) -> float:
@@ -86,7 +93,7 @@ class RoadGraph:
     """Directed arcs of ``layout`` that ``vehicle_type`` may use (every arc when None);
     ``turn_radius_m``: the vehicle's minimum turning radius (0: it turns on the spot)."""
 
-    CACHED_GOALS = 256  # shortest-time tables kept (stations and homes repeat)
+    CACHED_FLOATS = 12_000_000  # the shortest-time tables kept (96 MB; goals repeat)
 
     def __init__(
         self,
@@ -133,13 +140,21 @@ class RoadGraph:
             (np.array(list(fastest.values()), dtype=np.float64), (rows, cols)), shape=(n, n)
         )
 
+        self._arc: dict[tuple[str, str], Arc] = {}
+        for arcs in self.out.values():
+            for a in arcs:
+                self._arc.setdefault((a.start, a.end), a)  # the first by edge id
+        # by node index (the planner's inner loop): (arc, index of its end)
+        self.out_k: list[list[tuple[Arc, int]]] = [
+            [(a, self.index[a.end]) for a in self.out[nid]] for nid in self.ids
+        ]
         # car-like: the arcs it can take after arriving by each arc
-        self._exits: dict[Arc, list[Arc]] = {}
+        self._exits: dict[Arc, list[tuple[Arc, int]]] = {}
         if turn_radius_m > 0:
             for arcs in self.out.values():
                 for a in arcs:
                     self._exits[a] = [
-                        b
+                        (b, self.index[b.end])
                         for b in self.out[a.end]
                         if turn_fits(turn_radius_m, a.heading_end_rad, b, a.length_m)
                     ]
@@ -153,37 +168,50 @@ class RoadGraph:
     ) -> list[Arc]:
         """The arcs out of ``node`` after arriving by ``arrived_by``; standing there (None),
         facing ``heading_rad`` (None: any way, as a vehicle that turns on the spot)."""
+        return [a for a, _ in self.exits_k(arrived_by, self.index[node], heading_rad)]
+
+    def exits_k(
+        self, arrived_by: Arc | None, node_k: int, heading_rad: float | None = None
+    ) -> list[tuple[Arc, int]]:
+        """``exits`` by node index, each arc with the index of its end."""
         if not self.car_like:
-            return self.out[node]
+            return self.out_k[node_k]
         if arrived_by is not None:
             return self._exits[arrived_by]
         if heading_rad is None:
-            return self.out[node]
-        return [
-            b for b in self.out[node] if turn_fits(self.turn_radius_m, heading_rad, b, b.length_m)
-        ]
+            return self.out_k[node_k]
+        r, h = self.turn_radius_m, heading_rad
+        return [(b, k) for b, k in self.out_k[node_k] if turn_fits(r, h, b, b.length_m)]
 
     def arc(self, start: str, end: str) -> Arc:
-        for a in self.out[start]:
-            if a.end == end:
-                return a
-        raise KeyError(f"no edge {start} -> {end}")
+        a = self._arc.get((start, end))
+        if a is None:
+            raise KeyError(f"no edge {start} -> {end}")
+        return a
 
     def times_to(self, goal: str) -> Times:
         """Shortest time (s) from every node that can reach ``goal`` (Dijkstra, reversed;
-        the last ``CACHED_GOALS`` tables are kept). Do not modify the table returned."""
-        if goal in self._times:
+        the last tables, up to ``CACHED_FLOATS`` times in all, are kept). Do not modify the
+        table returned."""
+        got = self._times.get(goal)
+        if got is not None:
             self._times.move_to_end(goal)
-            return self._times[goal]
-        best = self._dijkstra_to(goal)
-        self._times[goal] = best
-        if len(self._times) > self.CACHED_GOALS:
-            self._times.popitem(last=False)
-        return best
+            return got
+        self.prepare([goal])
+        return self._times[goal]
 
-    def _dijkstra_to(self, goal: str) -> Times:
-        dist = dijkstra(self._reversed, directed=True, indices=self.index[goal])
-        return Times(self.index, dist.tolist())
+    def prepare(self, goals: Iterable[str]) -> None:
+        """Work out the tables to ``goals`` now (the ones not kept yet), in batches: one
+        SciPy call for many goals costs far less than one call each."""
+        todo = [g for g in dict.fromkeys(goals) if g not in self._times and g in self.index]
+        keep = max(256, self.CACHED_FLOATS // max(len(self.ids), 1))
+        for k in range(0, len(todo), 64):
+            batch = todo[k : k + 64]
+            dist = dijkstra(self._reversed, directed=True, indices=[self.index[g] for g in batch])
+            for g, row in zip(batch, np.atleast_2d(dist), strict=True):
+                self._times[g] = Times(self.index, row)
+                if len(self._times) > keep:
+                    self._times.popitem(last=False)
 
     def astar(self, start: str, goal: str) -> tuple[list[str], float] | None:
         """The quickest node path and its time (s), or None when ``goal`` is unreachable.
