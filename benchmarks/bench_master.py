@@ -10,12 +10,17 @@ how long its LIF file takes to write and load, the build time, the simulated-to-
 factor, the master's planning time per route (mean, 95th percentile, max), the time of its
 whole tick (dispatch, grants, metrics: mean and 95th percentile, one tick every 0.5 s) and the
 orders done. ``--weight 1`` plans every route the quickest that fits (the default is the
-scenario default, ``master.plan_weight``).
+scenario default, ``master.plan_weight``). ``--replay N`` also keeps every third planning
+problem of the run (up to N: the reservation table copied as it was) and solves each again
+five times after the run, printing the fastest of the five: the route search alone, far less
+sensitive to other load on the machine than the times taken during the run (the copies slow
+the run down: its real-time factor is then lower).
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import shutil
 import tempfile
@@ -24,7 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+import agvsim.master.master as master_module
 from agvsim.master.run import InProcessRun
+from agvsim.master.traffic import NoRoute, plan_route
 from agvsim.scenario import parse_scenario
 from agvsim.world.lif import Edge, EdgeProps, Layout, Node, NodeProps, Station, load_lif, save_lif
 
@@ -119,6 +126,7 @@ def bench(
     rate: float,
     mqtt: bool,
     weight: float | None = None,
+    replay: int = 0,
 ) -> dict:
     out: dict = {"vehicles": n}
     lay = big_warehouse(cols, rows)
@@ -151,9 +159,26 @@ def bench(
             tick_s.append(time.perf_counter() - w)
 
     run.master.tick = timed_tick  # type: ignore[method-assign]
+    kept: list[tuple] = []
+    copying_s: dict[int, float] = {}  # plan index -> time spent copying its table
+
+    def keeping(graph, table, *a, **kw):  # noqa: ANN001, ANN202 - plan_route's own
+        k = len(run.master.plan_times_s)  # the index its time will have
+        if len(kept) < replay and k % 3 == 0:
+            w = time.perf_counter()
+            kept.append((graph, copy.deepcopy(table), a, kw))
+            copying_s[k] = time.perf_counter() - w
+        return plan_route(graph, table, *a, **kw)
+
+    master_module.plan_route = keeping  # type: ignore[assignment]
     t0 = time.perf_counter()
-    run.run()
+    try:
+        run.run()
+    finally:
+        master_module.plan_route = plan_route
     wall = time.perf_counter() - t0
+    for k, c in copying_s.items():  # the master timed the copying as planning: take it out
+        run.master.plan_times_s[k] -= c
     plans = np.array(run.master.plan_times_s) * 1000
     ticks = np.array(tick_s) * 1000
     s = run.summary()
@@ -170,9 +195,36 @@ def bench(
         "collisions": s["collisions"],
         "deadlocks": s["deadlocks"],
     }
+    if kept:
+        out |= replayed(kept, run.master.cfg.plan_weight)
     if mqtt:
         out |= bench_mqtt(sc, seconds)
     shutil.rmtree(folder, ignore_errors=True)
+    return out
+
+
+def replayed(kept: list[tuple], weight: float) -> dict:
+    """The kept planning problems solved again, fastest of five each (ms), with the run's
+    weight and with weight 1."""
+    out: dict = {"replayed_plans": len(kept)}
+    for w, name in ((weight, "replay"), (1.0, "replay_weight1")):
+        best = []
+        for graph, table, a, kw in kept:
+            times = []
+            for _ in range(5):
+                t0 = time.perf_counter()
+                try:
+                    plan_route(graph, table, *a, **(kw | {"weight": w}))
+                except NoRoute:
+                    pass
+                times.append(time.perf_counter() - t0)
+            best.append(min(times))
+        ms = np.array(best) * 1000
+        out |= {
+            f"{name}_ms_mean": round(float(ms.mean()), 2),
+            f"{name}_ms_p95": round(float(np.percentile(ms, 95)), 2),
+            f"{name}_ms_max": round(float(ms.max()), 2),
+        }
     return out
 
 
@@ -216,8 +268,9 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=20.0, help="orders per vehicle per hour")
     ap.add_argument("--mqtt", action="store_true", help="also over Mosquitto")
     ap.add_argument("--weight", type=float, default=None, help="master.plan_weight (>= 1)")
+    ap.add_argument("--replay", type=int, default=0, help="planning problems to solve again")
     a = ap.parse_args()
-    out = bench(a.vehicles, a.seconds, a.cols, a.rows, a.rate, a.mqtt, a.weight)
+    out = bench(a.vehicles, a.seconds, a.cols, a.rows, a.rate, a.mqtt, a.weight, a.replay)
     print(json.dumps(out, indent=1))
 
 

@@ -182,7 +182,7 @@ def plan_route(
     stop_nodes = {s.node for s in stops}
     avoid = frozenset(avoid) - stop_nodes if stop_nodes & avoid else avoid
     gap_cache: list[list[tuple[float, float]] | None] = [None] * len(ids)
-    safe = table.safe_intervals
+    safe, visits = table.safe_intervals, table.visits
 
     car = graph.car_like
     held = t0_s if held_since_s is None else min(held_since_s, t0_s)
@@ -241,8 +241,9 @@ def plan_route(
             if h == INF or ids[v] in avoid:
                 continue
             gv = gap_cache[v]
-            if gv is None:
-                gv = gap_cache[v] = safe(ids[v], serial)
+            if gv is None:  # (most nodes have no visits: no call for them)
+                name = ids[v]
+                gv = gap_cache[v] = safe(name, serial) if name in visits else FREE
             dt = arc.time_s
             for j, (lo, hi2) in enumerate(gv):
                 if hi2 <= a:
