@@ -7,12 +7,20 @@ Run ``python benchmarks/bench_master.py [--vehicles 1000] [--seconds 60] [--mqtt
 The vehicles carry no lidar (no protective field): what is measured is the master and the
 VDA 5050 vehicles, not ray casting (benchmarks/bench_rays.py). Prints the layout's size and
 how long its LIF file takes to write and load, the build time, the simulated-to-wall time
-factor, the master's planning time per route (mean, 95th percentile, max) and the orders done.
+factor, the master's planning time per route (mean, 95th percentile, max), the time of its
+whole tick (dispatch, grants, metrics: mean and 95th percentile, one tick every 0.5 s) and the
+orders done. ``--weight 1`` plans every route the quickest that fits (the default is the
+scenario default, ``master.plan_weight``). ``--replay N`` also keeps every third planning
+problem of the run (up to N: the reservation table copied as it was) and solves each again
+five times after the run, printing the fastest of the five: the route search alone, far less
+sensitive to other load on the machine than the times taken during the run (the copies slow
+the run down: its real-time factor is then lower).
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import shutil
 import tempfile
@@ -21,7 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+import agvsim.master.master as master_module
 from agvsim.master.run import InProcessRun
+from agvsim.master.traffic import NoRoute, plan_route
 from agvsim.scenario import parse_scenario
 from agvsim.world.lif import Edge, EdgeProps, Layout, Node, NodeProps, Station, load_lif, save_lif
 
@@ -63,7 +73,14 @@ def big_warehouse(cols: int, rows: int) -> Layout:
     return Layout("big", nodes, edges, stations, "generated warehouse")
 
 
-def scenario(folder: Path, lay: Layout, n: int, seconds: float, rate_per_vehicle_h: float) -> dict:
+def scenario(
+    folder: Path,
+    lay: Layout,
+    n: int,
+    seconds: float,
+    rate_per_vehicle_h: float,
+    weight: float | None = None,
+) -> dict:
     xs = [nd.x_m for nd in lay.nodes.values()]
     ys = [nd.y_m for nd in lay.nodes.values()]
     w, h = int(max(xs)) + 4, int(max(ys)) + 4  # 1 m cells
@@ -96,11 +113,21 @@ def scenario(folder: Path, lay: Layout, n: int, seconds: float, rate_per_vehicle
                 {"robot": r["name"], "start_node": p} for r, p in zip(robots, homes, strict=True)
             ],
         },
-        "master": {"generate": {"rate_per_h": rate_per_vehicle_h * n}},
+        "master": {"generate": {"rate_per_h": rate_per_vehicle_h * n}}
+        | ({} if weight is None else {"plan_weight": weight}),
     }
 
 
-def bench(n: int, seconds: float, cols: int, rows: int, rate: float, mqtt: bool) -> dict:
+def bench(
+    n: int,
+    seconds: float,
+    cols: int,
+    rows: int,
+    rate: float,
+    mqtt: bool,
+    weight: float | None = None,
+    replay: int = 0,
+) -> dict:
     out: dict = {"vehicles": n}
     lay = big_warehouse(cols, rows)
     folder = Path(tempfile.mkdtemp(prefix="agvsim-bench-master-"))
@@ -115,16 +142,45 @@ def bench(n: int, seconds: float, cols: int, rows: int, rate: float, mqtt: bool)
         "lif_write_s": round(t1 - t0, 3),
         "lif_load_s": round(t2 - t1, 3),
     }
-    sc = parse_scenario(scenario(folder, lay, n, seconds, rate), "bench")
+    sc = parse_scenario(scenario(folder, lay, n, seconds, rate, weight), "bench")
     sc._base_dir = folder
     t0 = time.perf_counter()
     run = InProcessRun(sc, master_period_s=0.5)
     run.step()
     out["build_s"] = round(time.perf_counter() - t0, 2)
+    tick_s: list[float] = []
+    tick = run.master.tick
+
+    def timed_tick(t_s: float) -> list:
+        w = time.perf_counter()
+        try:
+            return tick(t_s)
+        finally:
+            tick_s.append(time.perf_counter() - w)
+
+    run.master.tick = timed_tick  # type: ignore[method-assign]
+    kept: list[tuple] = []
+    copying_s: dict[int, float] = {}  # plan index -> time spent copying its table
+
+    def keeping(graph, table, *a, **kw):  # noqa: ANN001, ANN202 - plan_route's own
+        k = len(run.master.plan_times_s)  # the index its time will have
+        if len(kept) < replay and k % 3 == 0:
+            w = time.perf_counter()
+            kept.append((graph, copy.deepcopy(table), a, kw))
+            copying_s[k] = time.perf_counter() - w
+        return plan_route(graph, table, *a, **kw)
+
+    master_module.plan_route = keeping  # type: ignore[assignment]
     t0 = time.perf_counter()
-    run.run()
+    try:
+        run.run()
+    finally:
+        master_module.plan_route = plan_route
     wall = time.perf_counter() - t0
+    for k, c in copying_s.items():  # the master timed the copying as planning: take it out
+        run.master.plan_times_s[k] -= c
     plans = np.array(run.master.plan_times_s) * 1000
+    ticks = np.array(tick_s) * 1000
     s = run.summary()
     out |= {
         "in_process_real_time_factor": round(run.t_s / wall, 3),
@@ -132,14 +188,43 @@ def bench(n: int, seconds: float, cols: int, rows: int, rate: float, mqtt: bool)
         "plan_ms_p95": round(float(np.percentile(plans, 95)), 2) if plans.size else None,
         "plan_ms_max": round(float(plans.max()), 2) if plans.size else None,
         "routes_planned": int(plans.size),
+        "tick_ms_mean": round(float(ticks.mean()), 2),
+        "tick_ms_p95": round(float(np.percentile(ticks, 95)), 2),
         "orders_completed": s["orders_completed"],
         "orders_placed": s["orders_placed"],
         "collisions": s["collisions"],
         "deadlocks": s["deadlocks"],
     }
+    if kept:
+        out |= replayed(kept, run.master.cfg.plan_weight)
     if mqtt:
         out |= bench_mqtt(sc, seconds)
     shutil.rmtree(folder, ignore_errors=True)
+    return out
+
+
+def replayed(kept: list[tuple], weight: float) -> dict:
+    """The kept planning problems solved again, fastest of five each (ms), with the run's
+    weight and with weight 1."""
+    out: dict = {"replayed_plans": len(kept)}
+    for w, name in ((weight, "replay"), (1.0, "replay_weight1")):
+        best = []
+        for graph, table, a, kw in kept:
+            times = []
+            for _ in range(5):
+                t0 = time.perf_counter()
+                try:
+                    plan_route(graph, table, *a, **(kw | {"weight": w}))
+                except NoRoute:
+                    pass
+                times.append(time.perf_counter() - t0)
+            best.append(min(times))
+        ms = np.array(best) * 1000
+        out |= {
+            f"{name}_ms_mean": round(float(ms.mean()), 2),
+            f"{name}_ms_p95": round(float(np.percentile(ms, 95)), 2),
+            f"{name}_ms_max": round(float(ms.max()), 2),
+        }
     return out
 
 
@@ -182,8 +267,11 @@ def main() -> None:
     ap.add_argument("--rows", type=int, default=50, help="road nodes down")
     ap.add_argument("--rate", type=float, default=20.0, help="orders per vehicle per hour")
     ap.add_argument("--mqtt", action="store_true", help="also over Mosquitto")
+    ap.add_argument("--weight", type=float, default=None, help="master.plan_weight (>= 1)")
+    ap.add_argument("--replay", type=int, default=0, help="planning problems to solve again")
     a = ap.parse_args()
-    print(json.dumps(bench(a.vehicles, a.seconds, a.cols, a.rows, a.rate, a.mqtt), indent=1))
+    out = bench(a.vehicles, a.seconds, a.cols, a.rows, a.rate, a.mqtt, a.weight, a.replay)
+    print(json.dumps(out, indent=1))
 
 
 if __name__ == "__main__":

@@ -4,13 +4,14 @@ route whatever the delays (hypothesis), where a naive node-locking master deadlo
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agvsim.master.graph import RoadGraph
+from agvsim.master.graph import Arc, RoadGraph, turn_fits
 from agvsim.master.traffic import INF, NoRoute, Reservations, Stop, Visit, plan_route
 from agvsim.world.lif import Edge, EdgeProps, Layout, Node, NodeProps
 
@@ -186,12 +187,14 @@ def scenes(draw):
     return w, h, holes, starts, goals, order
 
 
+@pytest.mark.parametrize("weight", [1.0, 1.5])
 @settings(max_examples=150, deadline=None)
 @given(scenes())
-def test_planned_routes_never_overlap_and_always_finish(scene) -> None:
+def test_planned_routes_never_overlap_and_always_finish(weight, scene) -> None:
     """Whatever the layout, starts, goals and delays: routes planned one after the other never
     hold a node at the same planned time, and executing them in dependency order never
-    deadlocks - every vehicle that got a route reaches its goal."""
+    deadlocks - every vehicle that got a route reaches its goal. Weighted A* (weight > 1)
+    finds routes at most ``weight`` times slower than the quickest that fits."""
     w, h, holes, starts, goals, order = scene
     lay = grid(w, h, holes)
     g = RoadGraph(lay, T, 1.0)
@@ -206,10 +209,14 @@ def test_planned_routes_never_overlap_and_always_finish(scene) -> None:
         assert old is not None and old.serial == s
         table.remove(old)
         try:
-            steps = plan_route(g, table, s, node, 0.0, [Stop(goal)], max_expansions=20_000)
+            steps = plan_route(
+                g, table, s, node, 0.0, [Stop(goal)], max_expansions=20_000, weight=weight
+            )
         except NoRoute:
             table.add(old)
             continue
+        quickest = plan_route(g, table, s, node, 0.0, [Stop(goal)], max_expansions=20_000)
+        assert quickest[-1].arrive_s <= steps[-1].arrive_s <= weight * quickest[-1].arrive_s + 1e-9
         assert steps[0].node == node and steps[-1].node == goal
         for a, b in zip(steps, steps[1:], strict=False):
             assert b.node in [arc.end for arc in g.out[a.node]]
@@ -234,3 +241,85 @@ def test_wait_cycles_finds_each_deadlock_once() -> None:
     ]
     # the naive master's corridor swap, as a wait-for graph: head-on, each for the other
     assert wait_cycles({"agvW": "agvE", "agvE": "agvW"}) == [frozenset({"agvW", "agvE"})]
+
+
+# ------------------------------------------------------------------ car-like vehicles
+R_ACKERMANN = 0.5 / math.tan(math.radians(35.0))  # wheelbase 0.5 m, 35 deg lock: 0.714 m
+
+
+def test_turn_fits_hand_worked() -> None:
+    # a 90 deg turn driven as a quarter circle of radius R starts R tan(45 deg) = R before
+    # the node: it fits when half of each edge holds it
+    east = Arc("e", "a", "b", 2.0, 2.0, 0.0, 0.0)
+    north = Arc("n", "b", "c", 2.0, 2.0, math.pi / 2, math.pi / 2)
+    short_north = Arc("n", "b", "c", 1.2, 1.2, math.pi / 2, math.pi / 2)
+    back = Arc("w", "b", "a", 2.0, 2.0, math.pi, math.pi)
+    diagonal = Arc("d", "b", "c", 2.0, 2.0, math.radians(-120), math.radians(-120))
+    assert turn_fits(R_ACKERMANN, 0.0, north, 2.0)  # needs 0.714 m of 1.0 m
+    assert not turn_fits(R_ACKERMANN, 0.0, short_north, 2.0)  # needs 0.714 m of 0.6 m
+    assert turn_fits(R_ACKERMANN, 0.0, east, 2.0)  # straight on: needs nothing
+    assert not turn_fits(R_ACKERMANN, 0.0, back, 100.0)  # a U-turn never fits
+    # 120 deg: R tan(60 deg) = 1.237 m > 1.0 m; with 3 m edges it fits (1.5 m)
+    assert not turn_fits(R_ACKERMANN, 0.0, diagonal, 2.0)
+    assert turn_fits(R_ACKERMANN, 0.0, Arc("d", "b", "c", 3.0, 3.0, *[math.radians(-120)] * 2), 3.0)
+    assert turn_fits(0.0, 0.0, back, 0.1)  # it turns on the spot: anything goes
+
+
+def lollipop() -> Layout:
+    """A corridor w - a - b (2 m edges, both ways) ending in a square loop b - c - d - e - b
+    (2 m sides, both ways), and a dead-end spur s north of a."""
+    return layout(
+        {
+            "w": (-2, 0), "a": (0, 0), "b": (2, 0), "c": (4, 0), "d": (4, 2), "e": (2, 2),
+            "s": (0, 2),
+        },
+        [
+            ("w", "a", 1.0), ("a", "b", 1.0), ("b", "c", 1.0), ("c", "d", 1.0),
+            ("d", "e", 1.0), ("e", "b", 1.0), ("a", "s", 1.0),
+        ],
+    )  # fmt: skip
+
+
+def doubles_back(nodes: list[str]) -> bool:
+    """u -> w -> u somewhere on the route."""
+    return any(nodes[k] == nodes[k + 2] for k in range(len(nodes) - 2))
+
+
+def test_car_like_turns_round_only_on_a_loop() -> None:
+    lay = lollipop()
+    diff = RoadGraph(lay, T, 1.0)
+    car = RoadGraph(lay, T, 1.0, turn_radius_m=R_ACKERMANN)
+    arrived = car.arc("a", "b")  # it drove east into b: a is behind it
+    r = plan_route(diff, Reservations(), "X", "b", 0.0, [Stop("a")], heading_rad=0.0)
+    assert [s.node for s in r] == ["b", "a"]  # turns on the spot
+    r = plan_route(car, Reservations(), "X", "b", 0.0, [Stop("a")], arrived_by=arrived)
+    nodes = [s.node for s in r]
+    assert nodes in (["b", "c", "d", "e", "b", "a"], ["b", "e", "d", "c", "b", "a"])
+    assert not doubles_back(nodes)
+    # each turn on the way is one the lock allows (90 deg at c, d, e and at b)
+    arcs = [car.arc(u, v) for u, v in itertools.pairwise(nodes)]
+    for a, b in itertools.pairwise([arrived, *arcs]):
+        assert turn_fits(R_ACKERMANN, a.heading_end_rad, b, a.length_m)
+    assert r[-1].arrive_s == pytest.approx(5 * 2.0)  # 10 m at 1 m/s
+    # standing on b facing west (its reported heading): straight there
+    r = plan_route(car, Reservations(), "X", "b", 0.0, [Stop("a")], heading_rad=math.pi)
+    assert [s.node for s in r] == ["b", "a"]
+    # w is a dead end: it may pass it as a stop only to come back, which it cannot
+    with pytest.raises(NoRoute):
+        plan_route(car, Reservations(), "X", "b", 0.0, [Stop("w")], heading_rad=math.pi)
+
+
+def test_car_like_never_parks_where_it_cannot_leave() -> None:
+    lay = lollipop()
+    car = RoadGraph(lay, T, 1.0, turn_radius_m=R_ACKERMANN)
+    # the dead-end spur s: it could drive in but never out (a U-turn on s)
+    with pytest.raises(NoRoute):
+        plan_route(car, Reservations(), "X", "w", 0.0, [Stop("s")], heading_rad=0.0)
+    assert [s.node for s in plan_route(RoadGraph(lay, T, 1.0), Reservations(), "X", "w", 0.0,
+                                       [Stop("s")])] == ["w", "a", "s"]  # fmt: skip
+    # a stop on a dead end is as impossible: pick at s, then park on b
+    with pytest.raises(NoRoute):
+        plan_route(car, Reservations(), "X", "w", 0.0, [Stop("s", 3.0), Stop("b")])
+    # parking on c is fine: it leaves north (to d) whichever way it came
+    r = plan_route(car, Reservations(), "X", "w", 0.0, [Stop("c")], heading_rad=0.0)
+    assert [s.node for s in r] == ["w", "a", "b", "c"]

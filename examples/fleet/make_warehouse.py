@@ -1,7 +1,9 @@
 """Write scenarios/fleet_warehouse.lif.json and scenarios/fleet_warehouse.yaml: a 32 x 22 m
 hall with six racks, three roads joined by four aisles, rack stations on the roads, a charging
 lane with four chargers, parking spurs off the outer roads, and 20 vehicles of the five models
-parked there (off the roads, facing them).
+parked there (off the roads, facing them). The car-like vehicles (Ackermann: they cannot turn on
+the spot) park on drive-through bays (P09, P11, P13: entered from the road node on one side and
+left to the one on the other), since a dead-end spur is one they could enter but never leave.
 
     python examples/fleet/make_warehouse.py
 """
@@ -21,6 +23,8 @@ XS = list(range(-13, 14, 2))  # road node x positions (m)
 ROADS = {"A": 6.5, "B": 0.0, "C": -6.5}
 AISLES = {"V1": -13, "V2": -5, "V3": 5, "V4": 13}
 PARK_SOUTH = [1, 3, 5, 7, 9, 11, 13]
+DRIVE_THROUGH = [9, 11, 13]  # P09, P11, P13: bays that car-likes enter and leave going forward
+CAR_LIKE = ("agvsim.tricycle", "agvsim.ackermann")
 RACKS = [(x, y) for y in (3.25, -3.25) for x in (-9.0, 0.0, 9.0)]  # centres; 5 m x 1.2 m
 
 
@@ -67,6 +71,11 @@ def build() -> Layout:
         both(f"{a}s", f"C{k:02d}", 0.6)
     for k in range(len(XS)):
         both(f"A{k + 1:02d}", f"P{k + 1:02d}", 0.5)
+    for k in DRIVE_THROUGH:  # diagonals A(k-1) - Pk - A(k+1), for the steered types
+        for a, b in ((f"A{k - 1:02d}", f"P{k:02d}"), (f"P{k:02d}", f"A{k + 1:02d}")):
+            for s, e in ((a, b), (b, a)):
+                props = {t: EdgeProps(True, 0.5) for t in CAR_LIKE}
+                edges[f"{s}-{e}"] = Edge(f"{s}-{e}", s, e, props)
     for k, x in enumerate(PARK_SOUTH):
         both(f"C{XS.index(x) + 1:02d}", f"Q{k + 1}", 0.5)
     both("C01", "L0", 0.3)
@@ -99,7 +108,9 @@ def build() -> Layout:
 
 
 def scenario(layout: Layout) -> str:
-    starts = [f"P{k:02d}" for k in range(1, 15)] + [f"Q{k}" for k in range(1, 7)]
+    # tricycles on P07, P08, P10, P12; the Ackermann vehicles on the drive-through bays
+    north = [1, 2, 3, 4, 5, 6, 7, 8, 10, 12, *DRIVE_THROUGH, 14]
+    starts = [f"P{k:02d}" for k in north] + [f"Q{k}" for k in range(1, 7)]
     params = {
         "differential": "{wheel_radius_m: 0.1, half_track_m: 0.22}",
         "tricycle": "{wheel_radius_m: 0.1, wheelbase_m: 0.5, half_track_m: 0.2}",

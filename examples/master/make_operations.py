@@ -13,7 +13,7 @@ HERE = Path(__file__).resolve().parents[2] / "scenarios"
 
 MASTER = """\
 master:
-  generate: {rate_per_h: 360, until_s: 3300}  # Poisson, seeded by the scenario seed
+  generate: {rate_per_h: 240, until_s: 3300}  # Poisson, seeded by the scenario seed
   charging: {low_pct: 30, full_pct: 90}
   breakdowns:
     - {vehicle: agv07, at_s: 900}

@@ -50,16 +50,34 @@ class Agv:
     stalled: bool = False
     replan: bool = False  # its route crosses a broken vehicle: re-plan as soon as one fits
     retimed_s: float = -1e9  # when it was last re-planned for being late
+    turn_radius_m: float = 0.0  # car-like: its minimum turning radius (0: turns on the spot)
+    road: RoadGraph | None = None  # its routing graph (Master.graph), once known
+    _battery_of: dict | None = field(default=None, repr=False, compare=False)
+    _battery_now: tuple[float, bool] = field(default=(100.0, False), repr=False, compare=False)
 
     @property
     def battery_pct(self) -> float:
-        bs = (self.state or {}).get("batteryState") or (self.state or {}).get("powerSupply") or {}
-        return float(bs.get("batteryCharge", bs.get("stateOfCharge", 100.0)))
+        return self._battery()[0]
 
     @property
     def charging(self) -> bool:
-        bs = (self.state or {}).get("batteryState") or (self.state or {}).get("powerSupply") or {}
-        return bool(bs.get("charging", False))
+        return self._battery()[1]
+
+    def _battery(self) -> tuple[float, bool]:
+        """(charge %, charging) from the last state, read once per state message."""
+        st = self.state or {}
+        if self._battery_of is not st:
+            bs = st.get("batteryState") or st.get("powerSupply") or {}
+            pct = float(bs.get("batteryCharge", bs.get("stateOfCharge", 100.0)))
+            self._battery_now = (pct, bool(bs.get("charging", False)))
+            self._battery_of = st
+        return self._battery_now
+
+    @property
+    def heading_rad(self) -> float | None:
+        """Its reported heading (None before its first state with a position)."""
+        pos = (self.state or {}).get("agvPosition") or (self.state or {}).get("mobileRobotPosition")
+        return float(pos["theta"]) if pos and "theta" in pos else None
 
     @property
     def decision_node(self) -> str:

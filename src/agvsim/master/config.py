@@ -66,3 +66,10 @@ class MasterConfig(StrictConfig):
         description="a vehicle this far behind its plan is re-planned (others stop waiting)",
     )
     margin_s: float = Field(default=0.5, ge=0, le=60, description="planned time between two visits")
+    plan_weight: float = Field(
+        default=1.3,
+        ge=1,
+        le=10,
+        description="weighted A* in the route search: routes at most this much slower than "
+        "the quickest that fits, found far sooner (1: always the quickest)",
+    )

@@ -6,13 +6,23 @@ speed (trajectories: the sampled NURBS length). ``astar`` is a small A* over a b
 route planner's heuristic, the dispatcher's cost) come from SciPy's compiled Dijkstra
 (``scipy.sparse.csgraph``) on the reversed graph: on a 5,000-node layout a pure-Python
 Dijkstra took ~0.1 s a goal.
+
+A car-like vehicle (``turn_radius_m`` > 0: Ackermann, a tricycle with less than 90 deg of
+steering lock) cannot turn round on a node nor take a sharp corner: ``exits(arc)`` lists the
+arcs it can drive on after arriving by ``arc``. A turn of angle theta, driven as a circular arc
+of radius R tangent to both edges, starts R tan(theta / 2) before the node and ends as far
+after it; it is allowed when that fits in half of each edge (the other half is kept for the
+turn at the edge's other end). A U-turn (theta = pi) never fits: such a vehicle turns round
+only by driving a loop of the layout.
 """
 
 from __future__ import annotations
 
 import heapq
 import math
+from array import array
 from collections import OrderedDict
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,12 +36,17 @@ class Times:
     """Shortest times (s) to one goal by node id; ``get`` gives ``default`` (inf) for a node
     that cannot reach it."""
 
-    def __init__(self, index: dict[str, int], times: list[float]):
-        self._index, self._times = index, times
+    def __init__(self, index: dict[str, int], times: np.ndarray):
+        # by node index (RoadGraph.index): a C array of doubles (its items are plain floats,
+        # the planner's look-ups) and a NumPy view of the same memory (the dispatcher's)
+        self._index = index
+        self.by_index = array("d")
+        self.by_index.frombytes(np.ascontiguousarray(times, dtype=np.float64).tobytes())
+        self.array = np.frombuffer(self.by_index, dtype=np.float64)
 
     def get(self, node: str, default: float = math.inf) -> float:
         k = self._index.get(node)
-        t = math.inf if k is None else self._times[k]
+        t = math.inf if k is None else self.by_index[k]
         return default if t == math.inf else t
 
     def __getitem__(self, node: str) -> float:
@@ -51,18 +66,49 @@ class Arc:
     end: str
     length_m: float
     time_s: float
+    heading_start_rad: float = 0.0  # the direction of travel leaving ``start``
+    heading_end_rad: float = 0.0  # ... and arriving at ``end``
+
+
+def turn_fits(turn_radius_m: float, heading_in_rad: float, arc_out: Arc, room_in_m: float) -> bool:
+    """Can a vehicle of minimum turning radius ``turn_radius_m`` arriving at ``arc_out.start``
+    heading ``heading_in_rad`` drive on along ``arc_out``? ``room_in_m``: the length of the edge
+    it arrives by (its half is the room before the node)."""
+    if turn_radius_m <= 0:
+        return True
+    theta = abs(math.remainder(arc_out.heading_start_rad - heading_in_rad, math.tau))
+    if theta > math.radians(170.0):
+        return False
+    need_m = turn_radius_m * math.tan(theta / 2)
+    return need_m <= 0.5 * min(room_in_m, arc_out.length_m) + 1e-9
+
+
+def _headings(pts: list[tuple[float, float]]) -> tuple[float, float]:
+    (ax, ay), (bx, by) = pts[0], pts[1]
+    (cx, cy), (dx, dy) = pts[-2], pts[-1]
+    return math.atan2(by - ay, bx - ax), math.atan2(dy - cy, dx - cx)
 
 
 class RoadGraph:
-    """Directed arcs of ``layout`` that ``vehicle_type`` may use (every arc when None)."""
+    """Directed arcs of ``layout`` that ``vehicle_type`` may use (every arc when None);
+    ``turn_radius_m``: the vehicle's minimum turning radius (0: it turns on the spot)."""
 
-    CACHED_GOALS = 256  # shortest-time tables kept (stations and homes repeat)
+    CACHED_FLOATS = 12_000_000  # the shortest-time tables kept (96 MB; goals repeat)
 
-    def __init__(self, layout: Layout, vehicle_type: str | None, max_speed_m_s: float):
+    def __init__(
+        self,
+        layout: Layout,
+        vehicle_type: str | None,
+        max_speed_m_s: float,
+        turn_radius_m: float = 0.0,
+    ):
         self._times: OrderedDict[str, Times] = OrderedDict()
         if max_speed_m_s <= 0:
             raise ValueError(f"max_speed_m_s {max_speed_m_s}: must be > 0")
+        if not turn_radius_m >= 0:
+            raise ValueError(f"turn_radius_m {turn_radius_m}: must be >= 0")
         self.layout = layout
+        self.turn_radius_m = turn_radius_m
         self.out: dict[str, list[Arc]] = {n: [] for n in layout.nodes}
         self.into: dict[str, list[Arc]] = {n: [] for n in layout.nodes}
         for e in sorted(layout.edges.values(), key=lambda e: e.edge_id):
@@ -70,13 +116,14 @@ class RoadGraph:
             if vehicle_type is not None and props is None:
                 continue
             if props is not None and props.trajectory is not None:
-                pts = props.trajectory.sample(64)
-                length = float(sum(math.dist(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)))
+                pts = [(float(x), float(y)) for x, y in props.trajectory.sample(64)]
             else:
-                length = math.dist(layout.node_xy(e.start), layout.node_xy(e.end))
+                pts = [layout.node_xy(e.start), layout.node_xy(e.end)]
+            length = float(sum(math.dist(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)))
             limit = props.max_speed_m_s if props is not None else None
             speed = max_speed_m_s if limit is None else min(limit, max_speed_m_s)
-            arc = Arc(e.edge_id, e.start, e.end, length, length / speed)
+            h0, h1 = _headings(pts)
+            arc = Arc(e.edge_id, e.start, e.end, length, length / speed, h0, h1)
             self.out[e.start].append(arc)
             self.into[e.end].append(arc)
         self.ids = sorted(layout.nodes)
@@ -93,27 +140,78 @@ class RoadGraph:
             (np.array(list(fastest.values()), dtype=np.float64), (rows, cols)), shape=(n, n)
         )
 
+        self._arc: dict[tuple[str, str], Arc] = {}
+        for arcs in self.out.values():
+            for a in arcs:
+                self._arc.setdefault((a.start, a.end), a)  # the first by edge id
+        # by node index (the planner's inner loop): (arc, index of its end)
+        self.out_k: list[list[tuple[Arc, int]]] = [
+            [(a, self.index[a.end]) for a in self.out[nid]] for nid in self.ids
+        ]
+        # car-like: the arcs it can take after arriving by each arc
+        self._exits: dict[Arc, list[tuple[Arc, int]]] = {}
+        if turn_radius_m > 0:
+            for arcs in self.out.values():
+                for a in arcs:
+                    self._exits[a] = [
+                        (b, self.index[b.end])
+                        for b in self.out[a.end]
+                        if turn_fits(turn_radius_m, a.heading_end_rad, b, a.length_m)
+                    ]
+
+    @property
+    def car_like(self) -> bool:
+        return self.turn_radius_m > 0
+
+    def exits(
+        self, arrived_by: Arc | None, node: str, heading_rad: float | None = None
+    ) -> list[Arc]:
+        """The arcs out of ``node`` after arriving by ``arrived_by``; standing there (None),
+        facing ``heading_rad`` (None: any way, as a vehicle that turns on the spot)."""
+        return [a for a, _ in self.exits_k(arrived_by, self.index[node], heading_rad)]
+
+    def exits_k(
+        self, arrived_by: Arc | None, node_k: int, heading_rad: float | None = None
+    ) -> list[tuple[Arc, int]]:
+        """``exits`` by node index, each arc with the index of its end."""
+        if not self.car_like:
+            return self.out_k[node_k]
+        if arrived_by is not None:
+            return self._exits[arrived_by]
+        if heading_rad is None:
+            return self.out_k[node_k]
+        r, h = self.turn_radius_m, heading_rad
+        return [(b, k) for b, k in self.out_k[node_k] if turn_fits(r, h, b, b.length_m)]
+
     def arc(self, start: str, end: str) -> Arc:
-        for a in self.out[start]:
-            if a.end == end:
-                return a
-        raise KeyError(f"no edge {start} -> {end}")
+        a = self._arc.get((start, end))
+        if a is None:
+            raise KeyError(f"no edge {start} -> {end}")
+        return a
 
     def times_to(self, goal: str) -> Times:
         """Shortest time (s) from every node that can reach ``goal`` (Dijkstra, reversed;
-        the last ``CACHED_GOALS`` tables are kept). Do not modify the table returned."""
-        if goal in self._times:
+        the last tables, up to ``CACHED_FLOATS`` times in all, are kept). Do not modify the
+        table returned."""
+        got = self._times.get(goal)
+        if got is not None:
             self._times.move_to_end(goal)
-            return self._times[goal]
-        best = self._dijkstra_to(goal)
-        self._times[goal] = best
-        if len(self._times) > self.CACHED_GOALS:
-            self._times.popitem(last=False)
-        return best
+            return got
+        self.prepare([goal])
+        return self._times[goal]
 
-    def _dijkstra_to(self, goal: str) -> Times:
-        dist = dijkstra(self._reversed, directed=True, indices=self.index[goal])
-        return Times(self.index, dist.tolist())
+    def prepare(self, goals: Iterable[str]) -> None:
+        """Work out the tables to ``goals`` now (the ones not kept yet), in batches: one
+        SciPy call for many goals costs far less than one call each."""
+        todo = [g for g in dict.fromkeys(goals) if g not in self._times and g in self.index]
+        keep = max(256, self.CACHED_FLOATS // max(len(self.ids), 1))
+        for k in range(0, len(todo), 64):
+            batch = todo[k : k + 64]
+            dist = dijkstra(self._reversed, directed=True, indices=[self.index[g] for g in batch])
+            for g, row in zip(batch, np.atleast_2d(dist), strict=True):
+                self._times[g] = Times(self.index, row)
+                if len(self._times) > keep:
+                    self._times.popitem(last=False)
 
     def astar(self, start: str, goal: str) -> tuple[list[str], float] | None:
         """The quickest node path and its time (s), or None when ``goal`` is unreachable.

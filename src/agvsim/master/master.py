@@ -21,6 +21,8 @@ from __future__ import annotations
 import time
 from datetime import UTC, datetime
 
+import numpy as np
+
 from agvsim.fleet.dialect import DIALECTS
 from agvsim.fleet.messages import Stamper
 from agvsim.master.agv import ENDED, Agv, action, order_message
@@ -58,13 +60,18 @@ class Master:
         cfg: MasterConfig,
         transports: list[Transport] | None = None,
         epoch: datetime | None = None,
+        turn_radius_m: dict[str, float] | None = None,
     ):
+        """``turn_radius_m``: the minimum turning radius of each car-like vehicle by serial
+        (a vehicle not named turns on the spot); the VDA 5050 factsheet has no field for it,
+        so the runners read it from the vehicles' kinematic models."""
         self.layout, self.cfg = layout, cfg
+        self.turn_radius_m = dict(turn_radius_m or {})
         self.epoch = epoch or datetime(2026, 1, 1, tzinfo=UTC)
         self.table = Reservations(cfg.margin_s)
         self.policy = POLICIES[cfg.dispatch]
         self.agvs: dict[str, Agv] = {}
-        self._graphs: dict[tuple[str | None, float], RoadGraph] = {}
+        self._graphs: dict[tuple[str | None, float, float], RoadGraph] = {}
         self.upcoming = sorted(transports or [], key=lambda x: (x.created_s, x.transport_id))
         self.pending: list[Transport] = []
         self.transports: list[Transport] = list(self.upcoming)
@@ -73,6 +80,11 @@ class Master:
         self.plan_times_s: list[float] = []
         self.replan_failures = 0
         self._deadlocks_seen: set[frozenset[str]] = set()
+        self._homes: frozenset[str] = frozenset()  # parking places: no route passes them
+        # vehicles that reported, or that the master changed, since the last tick: only their
+        # utilisation is looked at again (metrics are O(changes) a tick)
+        self._touched: set[str] = set()
+        self._chargers: dict[str | None, list[str]] = {}  # by vehicle type
 
     # ------------------------------------------------------------------ input
     def receive(self, serial: str, topic: str, msg: dict) -> None:
@@ -87,19 +99,27 @@ class Master:
                 str(msg.get("manufacturer", "")),
                 dialect.version,
                 Stamper(dialect, str(msg.get("manufacturer", "")), serial, self.epoch),
+                turn_radius_m=self.turn_radius_m.get(serial, 0.0),
             )
             self.agvs = dict(sorted({**self.agvs, serial: agv}.items()))
         if topic == "factsheet":
             ts = msg.get("typeSpecification", {})
             agv.vehicle_type = ts.get("seriesName")
             agv.speed_m_s = float(msg.get("physicalParameters", {}).get("speedMax", 1.0))
+            agv.road = None  # its routing graph, for that type and speed
+            self.graph(agv)  # built now (with its tables to the goals), not in a tick
         elif topic == "state":
             agv.state = msg
+            self._touched.add(serial)
+            self.metrics.battery(serial, agv.battery_pct)
             pos = msg.get("agvPosition") or msg.get("mobileRobotPosition") or {}
             agv.map_id = str(pos.get("mapId", agv.map_id))
             node = msg.get("lastNodeId", "")
             if agv.home is None and node in self.layout.nodes:
                 agv.home = node
+                self._homes = self._homes | {node}
+                for g in self._graphs.values():
+                    g.prepare([node])
                 agv.route = [Step(node, self.t_s, INF)]
                 v = Visit(serial, node, 0, self.t_s, INF, granted=True)
                 agv.visits = [v]
@@ -107,12 +127,18 @@ class Master:
 
     # ------------------------------------------------------------------ helpers
     def graph(self, agv: Agv) -> RoadGraph:
-        key = (agv.vehicle_type, agv.speed_m_s)
+        if agv.road is not None:
+            return agv.road
+        key = (agv.vehicle_type, agv.speed_m_s, agv.turn_radius_m)
         if key not in self._graphs:
             types = self.layout.vehicle_types
             vt = agv.vehicle_type if agv.vehicle_type in types else None
-            self._graphs[key] = RoadGraph(self.layout, vt, agv.speed_m_s)
-        return self._graphs[key]
+            g = self._graphs[key] = RoadGraph(self.layout, vt, agv.speed_m_s, agv.turn_radius_m)
+            # the goals of every route: stations, chargers and homes (one batch now)
+            stations = [n for st in self.layout.stations.values() for n in st.interaction_node_ids]
+            g.prepare([*stations, *self.chargers(agv), *sorted(self._homes)])
+        agv.road = self._graphs[key]
+        return agv.road
 
     def static_time(self, agv: Agv, a: str, b: str) -> float:
         return self.graph(agv).times_to(b).get(a, INF)
@@ -121,11 +147,16 @@ class Master:
         return agv.home is not None and agv.vehicle_type is not None and agv.state is not None
 
     def chargers(self, agv: Agv) -> list[str]:
+        """The nodes where ``agv`` can charge (a node offering ``startCharging``)."""
+        got = self._chargers.get(agv.vehicle_type)
+        if got is not None:
+            return got
         out = []
         for nid, n in sorted(self.layout.nodes.items()):
             props = n.types.get(agv.vehicle_type or "") or next(iter(n.types.values()), None)
             if props and any(a.get("actionType") == "startCharging" for a in props.actions):
                 out.append(nid)
+        self._chargers[agv.vehicle_type] = out
         return out
 
     # ------------------------------------------------------------------ routes
@@ -140,10 +171,14 @@ class Master:
         for v in old:
             self.table.remove(v)
         t0 = max(t_s, start.arrive_s)
+        graph = self.graph(agv)
+        # how the vehicle reaches its decision point: by the route's arc into it, or it
+        # stands there facing its reported heading (what a car-like can turn to depends on it)
+        arrived_by = graph.arc(agv.route[g - 1].node, start.node) if g > 0 else None
         w0 = time.perf_counter()
         try:
             steps = plan_route(
-                self.graph(agv),
+                graph,
                 self.table,
                 agv.serial,
                 start.node,
@@ -151,9 +186,10 @@ class Master:
                 [s for s, _ in stops],
                 held_since_s=held,
                 stop_at_start=fresh,
-                avoid=frozenset(
-                    a.home for a in self.agvs.values() if a is not agv and a.home is not None
-                ),
+                avoid=self._homes,
+                arrived_by=arrived_by,
+                heading_rad=agv.heading_rad,
+                weight=self.cfg.plan_weight,
             )
         except NoRoute:
             for v in old:
@@ -185,6 +221,7 @@ class Master:
             agv.update_id, agv.granted, agv.sent, agv.reached = 0, 0, -1, 0
             agv.order_done = False
         agv.changed = True
+        self._touched.add(agv.serial)
         return True
 
     def _remaining_stops(self, agv: Agv) -> list[tuple[Stop, list[dict]]]:
@@ -195,8 +232,9 @@ class Master:
             v = agv.visits[agv.granted + 1]
             if v is None or self.table.first(v.node) is not v:
                 break
-            v.granted = True
+            self.table.grant(v)
             agv.granted += 1
+            self._touched.add(agv.serial)
 
     # ------------------------------------------------------------------ per vehicle
     def _progress(self, agv: Agv, t_s: float, out: list[Message]) -> None:
@@ -214,7 +252,9 @@ class Master:
         reached = int(st.get("lastNodeSequenceId", 0)) // 2
         if st.get("lastNodeId") != agv.route[min(reached, len(agv.route) - 1)].node:
             return
-        agv.reached = max(agv.reached, reached)
+        if reached > agv.reached:
+            agv.reached = reached
+            self._touched.add(agv.serial)
         for i in range(agv.reached):
             v = agv.visits[i]
             if v is not None:
@@ -240,6 +280,7 @@ class Master:
             and all_ended
         ):
             agv.order_done = True
+            self._touched.add(agv.serial)
             if agv.job == "charge":
                 agv.job = "charging"
             elif agv.job == "home":
@@ -264,6 +305,7 @@ class Master:
         to) for good, its transport goes back to the queue, and every vehicle that was to
         pass those nodes later is re-planned around them."""
         agv.broken = True
+        self._touched.add(agv.serial)
         self.metrics.breakdowns += 1
         hold = {agv.reached} | ({agv.reached + 1} if agv.granted > agv.reached else set())
         blocked = set()
@@ -271,7 +313,7 @@ class Master:
             if v is None:
                 continue
             if i in hold:
-                v.end_s = INF
+                self.table.hold_forever(v)
                 blocked.add(v.node)
             else:
                 self.table.remove(v)
@@ -296,13 +338,12 @@ class Master:
 
     # ------------------------------------------------------------------ the tick
     def tick(self, t_s: float) -> list[Message]:
-        dt = max(0.0, t_s - self.t_s)
         self.t_s = t_s
         out: list[Message] = []
         while self.upcoming and self.upcoming[0].created_s <= t_s:
             self.pending.append(self.upcoming.pop(0))
         for agv in self.agvs.values():
-            if self._ready(agv):
+            if (not agv.order_done or agv.serial in self._touched) and self._ready(agv):
                 self._progress(agv, t_s, out)
         self._charging(t_s, out)
         for agv in self.agvs.values():
@@ -314,7 +355,7 @@ class Master:
                     self.metrics.retimed += 1
         self._dispatch(t_s)
         for agv in self.agvs.values():
-            if not self._ready(agv) or agv.broken or agv.order_done and not agv.changed:
+            if agv.order_done and not agv.changed or agv.broken or not self._ready(agv):
                 continue
             self._grant(agv)
             if agv.granted > agv.sent or agv.changed:
@@ -322,7 +363,8 @@ class Master:
                     (agv.serial, "order", order_message(agv, self.layout, self.graph(agv), t_s))
                 )
                 agv.sent, agv.changed = agv.granted, False
-        self.metrics.step(self, dt)
+        self.metrics.step(self, t_s, sorted(self._touched))
+        self._touched.clear()
         self._detect_deadlocks()
         self._detect_stalls(t_s)
         return out
@@ -343,6 +385,10 @@ class Master:
         """A vehicle with an order that has neither passed a node, nor finished an action,
         nor been sent anything for ``stall_s``: counted once (it must never happen)."""
         for a in self.agvs.values():
+            if a.order_done or a.broken or a.job == "charging":
+                if a.progress:
+                    a.progress, a.progress_s, a.stalled = (), t_s, False
+                continue
             st = a.state or {}
             key = (
                 st.get("lastNodeSequenceId"),
@@ -351,7 +397,7 @@ class Master:
                 sum(x.get("actionStatus") in ENDED for x in st.get("actionStates", [])),
                 a.job,
             )
-            if key != a.progress or a.order_done or a.broken or a.job == "charging":
+            if key != a.progress:
                 a.progress, a.progress_s, a.stalled = key, t_s, False
             elif t_s - a.progress_s > self.cfg.stall_s and not a.stalled:
                 a.stalled = True
@@ -360,7 +406,7 @@ class Master:
     def _charging(self, t_s: float, out: list[Message]) -> None:
         low, full = self.cfg.charging.low_pct, self.cfg.charging.full_pct
         for agv in self.agvs.values():
-            if not self._ready(agv) or agv.broken:
+            if agv.job not in ("charging", "idle") or agv.broken or not self._ready(agv):
                 continue
             if agv.job == "charging" and agv.charging and agv.battery_pct >= full:
                 if not agv.stop_charging_sent:
@@ -384,9 +430,9 @@ class Master:
         return [
             a.serial
             for a in self.agvs.values()
-            if self._ready(a)
+            if a.job in ("idle", "home")
             and not a.broken
-            and a.job in ("idle", "home")
+            and self._ready(a)
             and a.battery_pct >= low
             and not a.charging
         ]
@@ -395,18 +441,36 @@ class Master:
         if not self.pending:
             return
         free = self.available()
+        # where each candidate decides next, by node index, grouped by routing graph: the
+        # cost of a pick-up for all of them is one table look-up per group (numpy)
+        by_graph: dict[RoadGraph, tuple[list[int], list[int]]] = {}
+        for pos, sn in enumerate(free):
+            a = self.agvs[sn]
+            g = self.graph(a)
+            here = a.route[-1 if a.order_done else a.granted].node
+            rows, nodes = by_graph.setdefault(g, ([], []))
+            rows.append(pos)
+            nodes.append(g.index[here])
+        groups = {g: (np.array(r), np.array(n)) for g, (r, n) in by_graph.items()}
+
+        def costs(node: str) -> np.ndarray:
+            out = np.full(len(free), INF)
+            for g, (rows, nodes) in groups.items():
+                out[rows] = g.times_to(node).array[nodes]
+            return out
+
+        def take(pos: int) -> None:  # candidate ``pos`` got an order: drop its row
+            del free[pos]
+            for g, (rows, nodes) in groups.items():
+                keep = rows != pos
+                groups[g] = (rows[keep] - (rows[keep] > pos), nodes[keep])
+
         left: list[Transport] = []
         for tr in self.pending:
             if not free:
                 left.append(tr)
                 continue
-
-            def cost(serial: str, node: str) -> float:
-                a = self.agvs[serial]
-                here = a.route[-1 if a.order_done else a.granted].node
-                return self.static_time(a, here, node)
-
-            serial = self.policy(tr, free, cost)
+            serial = self.policy(tr, free, costs)
             agv = self.agvs.get(serial) if serial else None
             if agv is None:
                 left.append(tr)
@@ -426,7 +490,7 @@ class Master:
             if self.assign(agv, stops, t_s):
                 tr.vehicle, tr.assigned_s = agv.serial, t_s
                 agv.transport, agv.job = tr, "transport"
-                free.remove(agv.serial)
+                take(free.index(agv.serial))
             else:
                 left.append(tr)
         self.pending = left

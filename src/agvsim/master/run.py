@@ -13,6 +13,7 @@ from collections.abc import Callable
 from datetime import UTC, datetime
 from typing import Any
 
+from agvsim.control.mobility import Mobility
 from agvsim.fleet.build import Fleet, build_fleet
 from agvsim.master.config import MasterConfig
 from agvsim.master.master import Master
@@ -65,7 +66,12 @@ def build_master(
         problems.append(str(e))
     if problems:
         raise ScenarioError(sc._source, problems)
-    return Master(fleet.layout, cfg, transports, epoch)
+    radii = {}
+    for v in fleet.vehicles:
+        mob = Mobility.of(v.spec.model)
+        if mob.car_like and not mob.holonomic:
+            radii[v.cfg.serial] = mob.min_radius_m
+    return Master(fleet.layout, cfg, transports, epoch, turn_radius_m=radii)
 
 
 class Breakdowns:

@@ -23,12 +23,13 @@ a new route can only be placed after it, never before.
 
 from __future__ import annotations
 
-import heapq
 import math
+from bisect import insort
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from heapq import heappop, heappush
 
-from agvsim.master.graph import RoadGraph
+from agvsim.master.graph import Arc, RoadGraph
 
 INF = math.inf
 
@@ -46,42 +47,74 @@ class Visit:
         return (self.start_s, self.serial, self.index)
 
 
+FREE: list[tuple[float, float]] = [(-INF, INF)]  # the gaps of a node nobody visits
+
+
 @dataclass
 class Reservations:
-    """Pending visits per node, in planned order."""
+    """Pending visits per node, in planned order. The gaps between them are kept per node
+    until the node's visits change: change a visit only through ``grant`` and
+    ``hold_forever``."""
 
     margin_s: float = 0.5
     visits: dict[str, list[Visit]] = field(default_factory=dict)
+    _gaps: dict[str, list[tuple[float, float]]] = field(default_factory=dict, repr=False)
 
     def add(self, v: Visit) -> None:
-        q = self.visits.setdefault(v.node, [])
-        q.append(v)
-        q.sort(key=Visit.key)
+        insort(self.visits.setdefault(v.node, []), v, key=Visit.key)
+        self._gaps.pop(v.node, None)
 
     def remove(self, v: Visit) -> None:
         q = self.visits.get(v.node, [])
         for k, x in enumerate(q):
             if x is v:
                 del q[k]
+                self._gaps.pop(v.node, None)
+                if not q:
+                    del self.visits[v.node]
                 return
+
+    def grant(self, v: Visit) -> None:
+        """``v`` is released to its vehicle: it holds its node from now on."""
+        v.granted = True
+        self._gaps.pop(v.node, None)
+
+    def hold_forever(self, v: Visit) -> None:
+        """``v``'s vehicle never leaves (a breakdown)."""
+        v.end_s = INF
+        self._gaps.pop(v.node, None)
 
     def first(self, node: str) -> Visit | None:
         q = self.visits.get(node)
         return q[0] if q else None
 
     def safe_intervals(self, node: str, serial: str) -> list[tuple[float, float]]:
-        """The gaps between other vehicles' visits of ``node`` (with the margin)."""
-        out, lo = [], -INF
-        for v in self.visits.get(node, []):
+        """The gaps between other vehicles' visits of ``node`` (with the margin). Do not
+        modify the list returned."""
+        q = self.visits.get(node)
+        if not q:
+            return FREE
+        for v in q:
+            if v.serial == serial:
+                return self._between(q, serial)
+        got = self._gaps.get(node)
+        if got is None:
+            got = self._gaps[node] = self._between(q, "")
+        return got
+
+    def _between(self, q: list[Visit], serial: str) -> list[tuple[float, float]]:
+        out, lo, m = [], -INF, self.margin_s
+        for v in q:
             if v.serial == serial:
                 continue
             # a granted visit holds its node from now on, whatever its planned start: a
             # vehicle ahead of its plan may be there already
-            a = -INF if v.granted else v.start_s - self.margin_s
-            b = v.end_s + self.margin_s
+            a = -INF if v.granted else v.start_s - m
+            b = v.end_s + m
             if a > lo:
                 out.append((lo, a))
-            lo = max(lo, b)
+            if b > lo:
+                lo = b
         if lo < INF:
             out.append((lo, INF))
         return out
@@ -118,14 +151,21 @@ def plan_route(
     stop_at_start: bool = True,
     avoid: frozenset[str] = frozenset(),
     max_expansions: int = 100_000,
+    arrived_by: Arc | None = None,
+    heading_rad: float | None = None,
+    weight: float = 1.0,
 ) -> list[Step]:
     """The quickest route from ``start`` (at ``t0_s``) through ``stops`` that fits the gaps
     of ``table``, ending parked on the last stop. The vehicle has held ``start`` since
     ``held_since_s`` (default ``t0_s``): the gap it starts in must cover that too.
     ``stop_at_start`` False: a stop on ``start`` needs leaving and coming back (an order
-    update cannot add actions to its first node). ``avoid``: nodes never to enter (other
-    vehicles' parking places: a car-like vehicle cannot dodge into a dead end). Raises
-    NoRoute."""
+    update cannot add actions to its first node). ``avoid``: nodes never to enter unless they
+    are stops (vehicles' parking places). A car-like ``graph`` (a minimum turning radius) plans over
+    (node, the arc it arrived by): only turns its steering lock allows, and it parks only where
+    it can drive off again; ``arrived_by`` is how it reaches ``start`` (None: it stands there,
+    facing ``heading_rad``). ``weight`` > 1: weighted A* (f = g + weight h), a route at most
+    ``weight`` times slower than the quickest that fits, found after far fewer states (the
+    quickest one costs a search over every state that could beat it). Raises NoRoute."""
     if not stops:
         raise ValueError("a route needs at least one stop")
     to_stop = [graph.times_to(s.node) for s in stops]
@@ -135,70 +175,91 @@ def plan_route(
         rest[k] = stops[k].dwell_s + leg + rest[k + 1]
     if rest[0] == INF or start not in to_stop[0]:
         raise NoRoute(f"no path from {start} through {[s.node for s in stops]}")
-    cache: dict[str, list[tuple[float, float]]] = {}
+    # the search runs on node indices (graph.ids): list look-ups instead of dict ones
+    ids, index = graph.ids, graph.index
+    h_to = [t.by_index for t in to_stop]
+    stop_k = [index[s.node] for s in stops]
+    stop_nodes = {s.node for s in stops}
+    avoid = frozenset(avoid) - stop_nodes if stop_nodes & avoid else avoid
+    gap_cache: list[list[tuple[float, float]] | None] = [None] * len(ids)
+    safe, visits = table.safe_intervals, table.visits
 
-    def gaps(n: str) -> list[tuple[float, float]]:
-        if n not in cache:
-            cache[n] = table.safe_intervals(n, serial)
-        return cache[n]
-
+    car = graph.car_like
     held = t0_s if held_since_s is None else min(held_since_s, t0_s)
-    i0 = next((i for i, (a, b) in enumerate(gaps(start)) if a <= held and t0_s < b), None)
+    s0 = index[start]
+    g0 = gap_cache[s0] = safe(start, serial)
+    i0 = next((i for i, (a, b) in enumerate(g0) if a <= held and t0_s < b), None)
     if i0 is None:
         raise NoRoute(f"{start} is not free for {serial} at t={t0_s:.1f} s")
-    Key = tuple[str, int, int]
-    best: dict[Key, float] = {(start, i0, 0): t0_s}
-    parent: dict[Key, tuple[Key, float] | None] = {(start, i0, 0): None}
+    a0 = arrived_by if car else None
+    # a state: (node, the arc it arrived by (car-like only), safe interval, stops done)
+    Key = tuple[int, Arc | None, int, int]
+    k0: Key = (s0, a0, i0, 0)
+    best: dict[Key, float] = {k0: t0_s}
+    parent: dict[Key, tuple[Key, float] | None] = {k0: None}
     # ties of f (many equally quick ways on a grid; f rounded to the microsecond so that sums
-    # in another order tie too) go to the state furthest along: -g
-    heap: list[tuple[float, float, str, int, int]] = [
-        (round(t0_s + to_stop[0][start] + rest[0], 6), -t0_s, start, i0, 0)
+    # in another order tie too) go to the state furthest along: -g; then by node (its index
+    # follows its name), interval, stops done, push order
+    heap: list[tuple[float, float, int, int, int, int, Key]] = [
+        (round(t0_s + weight * (h_to[0][s0] + rest[0]), 6), -t0_s, s0, i0, 0, 0, k0)
     ]
-    closed: set[Key] = set()
+    pushed = 1
     expansions = 0
     goal: Key | None = None
+    last = len(stops) - 1
+    out_k = graph.out_k
     while heap:
-        _, neg_a, u, i, k = heapq.heappop(heap)
-        a = -neg_a
-        key = (u, i, k)
-        if key in closed:
-            continue
-        closed.add(key)
+        item = heappop(heap)
+        key = item[6]
+        a = -item[1]
+        if a > best[key]:
+            continue  # a quicker way here was found since (and expanded, or is queued)
         expansions += 1
         if expansions > max_expansions:
             break
-        hi = gaps(u)[i][1]
-        if u == stops[k].node and (stop_at_start or parent[key] is not None):
-            if k == len(stops) - 1:
-                if hi == INF:
+        u, came, i, k = key
+        gu = gap_cache[u]
+        assert gu is not None  # every state's node had its gaps looked up when pushed
+        hi = gu[i][1]
+        exits = graph.exits_k(came, u, heading_rad) if car else out_k[u]
+        if u == stop_k[k] and (stop_at_start or parent[key] is not None):
+            if k == last:
+                if hi == INF and (exits or not out_k[u]):
                     goal = key
                     break
             else:
                 a2 = a + stops[k].dwell_s
-                nk = (u, i, k + 1)
+                nk: Key = (u, came, i, k + 1)
                 if a2 < hi and a2 < best.get(nk, INF):
                     best[nk], parent[nk] = a2, (key, -1.0)
-                    h = to_stop[k + 1].get(u, INF) + rest[k + 1]
-                    heapq.heappush(heap, (round(a2 + h, 6), -a2, u, i, k + 1))
-        for arc in graph.out[u]:
-            if arc.end in avoid:
+                    h = h_to[k + 1][u] + rest[k + 1]
+                    heappush(heap, (round(a2 + weight * h, 6), -a2, u, i, k + 1, pushed, nk))
+                    pushed += 1
+        tk, rk = h_to[k], rest[k]
+        for arc, v in exits:
+            h = tk[v]
+            if h == INF or ids[v] in avoid:
                 continue
-            h = to_stop[k].get(arc.end, INF)
-            if h == INF:
-                continue
-            for j, (lo, hi2) in enumerate(gaps(arc.end)):
+            gv = gap_cache[v]
+            if gv is None:  # (most nodes have no visits: no call for them)
+                name = ids[v]
+                gv = gap_cache[v] = safe(name, serial) if name in visits else FREE
+            dt = arc.time_s
+            for j, (lo, hi2) in enumerate(gv):
                 if hi2 <= a:
                     continue
-                d = max(a, lo)
-                arrive = d + arc.time_s
+                d = a if a > lo else lo
+                arrive = d + dt
                 if arrive >= hi:
                     break  # cannot hold u until then (later gaps start later still)
                 if arrive >= hi2:
                     continue
-                nk = (arc.end, j, k)
+                nk = (v, arc if car else None, j, k)
                 if arrive < best.get(nk, INF):
                     best[nk], parent[nk] = arrive, (key, d)
-                    heapq.heappush(heap, (round(arrive + h + rest[k], 6), -arrive, arc.end, j, k))
+                    f = round(arrive + weight * (h + rk), 6)
+                    heappush(heap, (f, -arrive, v, j, k, pushed, nk))
+                    pushed += 1
     if goal is None:
         raise NoRoute(
             f"no conflict-free route for {serial} from {start} through "
@@ -216,11 +277,12 @@ def plan_route(
         key_, dep = p
     chain.reverse()
     steps: list[Step] = []
-    for (n, i, k), depart in chain:
+    for key_k, depart in chain:
+        k = key_k[3]
         if steps and steps[-1].depart_s == -1.0:  # stop k - 1 was done on this very node
             steps[-1].stop, steps[-1].depart_s = k - 1, depart
             continue
-        steps.append(Step(n, best[(n, i, k)], depart))
+        steps.append(Step(ids[key_k[0]], best[key_k], depart))
     steps[-1].depart_s, steps[-1].stop = INF, len(stops) - 1
     return steps
 
