@@ -365,3 +365,26 @@ def test_mixed_fleet_is_deterministic_per_seed() -> None:
     b.run()
     assert a.summary() == b.summary() and a.summary()["orders_completed"] > 5
     assert np.array_equal(a.fleet.sim.state.poses, b.fleet.sim.state.poses)
+
+
+def test_a_short_horizon_changes_the_messages_not_the_motion() -> None:
+    """``horizon_nodes`` caps the unreleased part of each order; vehicles drive only the base,
+    so every pose and metric is the same as with the whole route as the horizon."""
+    runs = {}
+    for cap in (None, 2):
+        cfg = MasterConfig(generate=GenerateConfig(rate_per_h=400), horizon_nodes=cap)
+        r = Checked(warehouse(4, cfg), seed=1, duration_s=150, master_period_s=0.25)
+        poses = []
+        while r.t_s < 150 - 1e-9:
+            r.step()
+            poses.append(r.fleet.sim.state.poses.copy())
+        runs[cap] = (np.array(poses), r.summary(), r.orders)
+    assert np.array_equal(runs[None][0], runs[2][0])
+    assert runs[None][1] == runs[2][1] and runs[2][1]["orders_completed"] > 0
+    longest = {
+        cap: max(sum(not n["released"] for n in o["nodes"]) for os in v[2].values() for o in os)
+        for cap, v in runs.items()
+    }
+    assert longest[2] == 2 < longest[None]
+    for orders in runs[2][2].values():
+        assert_base_and_horizon(orders)

@@ -421,6 +421,11 @@ class Vehicle:
         if msg is None:
             return
         oid = {"orderId": msg["orderId"], "orderUpdateId": str(msg["orderUpdateId"])}
+        if not msg["orderId"]:  # "" is what the state reports while the vehicle has no order
+            self._error(
+                "order", Problem.VALIDATION, "orderId is empty: every order needs an id", oid
+            )
+            return
         try:
             nodes, edges = parse_order(
                 msg, self.layout, self.supported, self.cfg.limits, self.cfg.vehicle_type

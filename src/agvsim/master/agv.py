@@ -91,13 +91,20 @@ def action(aid: str, kind: str, blocking: str = "HARD", **params: str) -> dict:
     return a
 
 
-def order_message(agv: Agv, layout: Layout, g: RoadGraph, t_s: float) -> dict:
+def order_message(
+    agv: Agv, layout: Layout, g: RoadGraph, t_s: float, horizon_nodes: int | None = None
+) -> dict:
     """The order (or order update) that sends what is new: from the node the vehicle last
-    got as released (its decision point) to the end of the route, released up to what is
-    granted (base), the rest as the horizon."""
+    got as released (its decision point), released up to what is granted (base), then the
+    horizon: the rest of the route, or its next ``horizon_nodes`` nodes (each update moves it
+    on with the base; the vehicle drives only the base, so a shorter horizon changes no motion,
+    only the size of every order and state message)."""
     first = 0 if agv.sent < 0 else agv.sent
+    end = len(agv.route)
+    if horizon_nodes is not None:
+        end = min(end, agv.granted + 1 + horizon_nodes)
     nodes, edges = [], []
-    for i in range(first, len(agv.route)):
+    for i in range(first, end):
         n = agv.route[i].node
         x, y = layout.node_xy(n)
         nodes.append(

@@ -73,3 +73,9 @@ class MasterConfig(StrictConfig):
         description="weighted A* in the route search: routes at most this much slower than "
         "the quickest that fits, found far sooner (1: always the quickest)",
     )
+    horizon_nodes: int | None = Field(
+        default=10,
+        ge=0,
+        le=1_000_000,
+        description="nodes of the route sent beyond the base (the horizon); null: the whole route",
+    )

@@ -360,7 +360,13 @@ class Master:
             self._grant(agv)
             if agv.granted > agv.sent or agv.changed:
                 out.append(
-                    (agv.serial, "order", order_message(agv, self.layout, self.graph(agv), t_s))
+                    (
+                        agv.serial,
+                        "order",
+                        order_message(
+                            agv, self.layout, self.graph(agv), t_s, self.cfg.horizon_nodes
+                        ),
+                    )
                 )
                 agv.sent, agv.changed = agv.granted, False
         self.metrics.step(self, t_s, sorted(self._touched))
