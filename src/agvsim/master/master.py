@@ -346,10 +346,11 @@ class Master:
             if (not agv.order_done or agv.serial in self._touched) and self._ready(agv):
                 self._progress(agv, t_s, out)
         self._charging(t_s, out)
+        blocking = self._blocking()
         for agv in self.agvs.values():
             if agv.replan and not agv.broken and not agv.order_done:
                 agv.replan = not self.assign(agv, self._remaining_stops(agv), t_s)
-            elif self._late(agv, t_s):
+            elif agv.serial in blocking and self._late(agv, t_s):
                 agv.retimed_s = t_s
                 if self.assign(agv, self._remaining_stops(agv), t_s):
                     self.metrics.retimed += 1
@@ -373,6 +374,26 @@ class Master:
         self._touched.clear()
         self._detect_deadlocks()
         self._detect_stalls(t_s)
+        return out
+
+    def _blocking(self) -> set[str]:
+        """Vehicles that hold others up: a visit of theirs not yet granted stands before
+        another vehicle's next visit in a node's queue. Only those are worth re-planning
+        when late (re-planning one that blocks nobody frees nobody, and at a thousand
+        vehicles most run somewhat late)."""
+        out: set[str] = set()
+        queues = self.table.visits
+        for a in self.agvs.values():
+            if a.order_done or a.broken or a.granted + 1 >= len(a.visits):
+                continue
+            w = a.visits[a.granted + 1]
+            if w is None or w.granted:
+                continue
+            for v in queues.get(w.node, ()):
+                if v is w:
+                    break
+                if not v.granted:
+                    out.add(v.serial)
         return out
 
     def _late(self, agv: Agv, t_s: float) -> bool:

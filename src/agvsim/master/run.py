@@ -105,6 +105,8 @@ class MasterLink:
         t = float(sim.state.t_s)
         m = self.master
         for v in self.fleet.vehicles:
+            if not v.outbox:  # most vehicles publish nothing in a step
+                continue
             for topic, msg, _retained in v.drain():
                 if topic in ("state", "factsheet"):
                     m.receive(v.cfg.serial, topic, msg)
