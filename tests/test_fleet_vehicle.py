@@ -476,3 +476,32 @@ def test_a_robot_safety_scanner_reports_its_protective_field_violation(tmp_path:
     r.sim.set_boxes(np.zeros((0, 5)))
     r.until(lambda: r.v().last_node.node_id == "r4c5", 10, "resumed to the end")
     assert not r.last_state()["safetyState"]["fieldViolation"]
+
+
+def test_a_vehicle_with_dynamics_drains_its_battery_by_motor_energy(tmp_path: Path) -> None:
+    """With a dynamics: block the charge falls by the energy the motors deliver (positive
+    wheel power over time, per ``battery_wh``), not by distance: checked against the power
+    the simulation reports, step by step."""
+    path = room_scenario(tmp_path, [("agv1", "differential", "r4c1", 0.0)])
+    text = path.read_text().replace(
+        "    sensors:\n",
+        "    dynamics: {mass_kg: 60, motor: {gear_ratio: 20, torque_max_nm: 1.5}}\n    sensors:\n",
+        1,
+    )
+    text = text.replace("start_node: r4c1}", "start_node: r4c1, battery_wh: 2}")
+    path.write_text(text)
+    r = Run(build_fleet(load_scenario(path), epoch=EPOCH))
+    v = r.v()
+    c0, b = v.battery.charge_pct, v.battery
+    assert b.drive_pct_m == 0 and b.pct_per_j == pytest.approx(100 / (2 * 3600))
+    r.v().receive("order", order(r.fleet.layout, ROW4))
+    energy, dt = 0.0, r.sim.dt_s
+    for _ in range(200):  # 10 s: it accelerates, drives and stops on r4c5
+        energy += float(np.maximum(r.sim.state.wheel_power_w[0], 0).sum()) * dt
+        r.step()
+    assert v.last_node is not None and v.last_node.node_id == "r4c5"
+    left = float(v._b.energy_j[0])  # delivered since the vehicle's last tick
+    assert energy > 1.0  # accelerating 60 kg takes joules
+    used = c0 - b.charge_pct
+    expected = b.idle_pct_s * v.t_s + b.pct_per_j * (energy - left)
+    assert used == pytest.approx(expected, rel=1e-9)

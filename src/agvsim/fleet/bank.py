@@ -49,6 +49,8 @@ class VehicleBank:
         self.charge_pct = z(n)
         self.idle_pct_s = z(n)
         self.drive_pct_m = z(n)
+        self.pct_per_j = z(n)  # battery drained by motor energy (robots with dynamics)
+        self.energy_j = z(n)  # motor energy delivered since the vehicle's last tick
         self.next_control_s = z(n)
         self.period_s = z(n)
         self.next_wake_s = z(n)  # the next publish due (state / visualization)
@@ -269,6 +271,8 @@ def tick(
     charge_pct: np.ndarray,
     idle_pct_s: np.ndarray,
     drive_pct_m: np.ndarray,
+    pct_per_j: np.ndarray,
+    energy_j: np.ndarray,
     next_control_s: np.ndarray,
     period_s: np.ndarray,
     next_wake_s: np.ndarray,
@@ -319,7 +323,10 @@ def tick(
         x, y, th = poses[k, 0], poses[k, 1], poses[k, 2]
         moved = math.hypot(x - pose[k, 0], y - pose[k, 1])
         dt = max(0.0, t - t_s[k])
-        c = max(0.0, charge_pct[k] - (idle_pct_s[k] * dt + drive_pct_m[k] * moved))
+        used = idle_pct_s[k] * dt + drive_pct_m[k] * moved
+        if pct_per_j[k] > 0.0:
+            used += pct_per_j[k] * energy_j[k]
+        c = max(0.0, charge_pct[k] - used)
         if c <= 0.0:
             slow[k] = True
             continue
@@ -366,6 +373,7 @@ def tick(
         pose[k, 0], pose[k, 1], pose[k, 2] = x, y, th
         dist_node_m[k] += moved
         charge_pct[k] = c
+        energy_j[k] = 0.0
         s[k] = s_new
         twist[k, 0], twist[k, 1], twist[k, 2] = vx, vy, w
         next_control_s[k] = t + period_s[k]
@@ -399,6 +407,8 @@ def run_tick(
         b.charge_pct,
         b.idle_pct_s,
         b.drive_pct_m,
+        b.pct_per_j,
+        b.energy_j,
         b.next_control_s,
         b.period_s,
         b.next_wake_s,

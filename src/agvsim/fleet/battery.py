@@ -7,7 +7,9 @@ import numpy as np
 
 class Battery:
     """``charge_pct`` in [0, 100]. Per second: -idle_pct_s, -drive_pct_m per metre driven,
-    +charge_pct_s while charging (and only then).
+    +charge_pct_s while charging (and only then). A robot with dynamics drains by energy
+    instead: ``pct_per_j`` per joule its motors deliver (``drive_pct_m`` 0); energy braking
+    returns is not recovered.
 
     The charge and the two drain rates live in one-element views (``bind``): a fleet keeps
     them in its ``VehicleBank`` rows, where the batch tick drains them too."""
@@ -19,12 +21,14 @@ class Battery:
         drive_pct_m: float = 0.05,
         charge_pct_s: float = 0.5,
         charging: bool = False,
+        pct_per_j: float = 0.0,
     ):
         self._charge = np.array([float(charge_pct)])
         self._idle = np.array([float(idle_pct_s)])
         self._drive = np.array([float(drive_pct_m)])
         self.charge_pct_s = charge_pct_s
         self.charging = charging
+        self.pct_per_j = pct_per_j
 
     def bind(self, charge: np.ndarray, idle: np.ndarray, drive: np.ndarray) -> None:
         """Keep the charge and the drain rates in these (1,) views from now on."""
@@ -55,11 +59,18 @@ class Battery:
     def drive_pct_m(self, value: float) -> None:
         self._drive[0] = value
 
-    def update(self, dt_s: float, distance_m: float) -> None:
+    @classmethod
+    def of_energy(cls, charge_pct: float, capacity_wh: float) -> Battery:
+        """A battery drained by the motors' energy (robots with dynamics)."""
+        return cls(charge_pct, drive_pct_m=0.0, pct_per_j=100.0 / (capacity_wh * 3600.0))
+
+    def update(self, dt_s: float, distance_m: float, energy_j: float = 0.0) -> None:
+        """``energy_j``: what the motors delivered over ``dt_s`` (robots with dynamics)."""
         if self.charging:
             self.charge_pct = min(100.0, self.charge_pct + self.charge_pct_s * dt_s)
         else:
             used = self.idle_pct_s * dt_s + self.drive_pct_m * abs(distance_m)
+            used += self.pct_per_j * energy_j
             self.charge_pct = max(0.0, self.charge_pct - used)
 
     @property

@@ -134,7 +134,12 @@ def build_fleet(sc: Scenario, epoch: datetime | None = None, seed: int | None = 
             vis_period_s=cfg.visualization_period_s,
             action_durations={"pick": cfg.pick_time_s, "drop": cfg.drop_time_s},
         )
-        veh = Vehicle(vc, spec, layout, lidar, v.start_node, epoch, Battery(v.battery_pct))
+        battery = (
+            Battery(v.battery_pct)
+            if spec.dynamics is None
+            else Battery.of_energy(v.battery_pct, v.battery_wh)
+        )
+        veh = Vehicle(vc, spec, layout, lidar, v.start_node, epoch, battery)
         vehicles.append(veh)
         key = None if sensor is None else (sensor.name, sensor.num_beams)
         groups.setdefault(key, []).append((i, veh))
@@ -152,4 +157,7 @@ def build_fleet(sc: Scenario, epoch: datetime | None = None, seed: int | None = 
         knows={r.name: r.knows for r in sc.robots if r.knows},
         on_controller_error=sc.on_controller_error,
     )
+    for b in bindings:
+        if isinstance(b.controller, FleetDriver):
+            b.controller.watch_power(sim, b.robots)
     return Fleet(sim, vehicles, layout, cfg)

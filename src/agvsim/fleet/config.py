@@ -37,6 +37,13 @@ class VehicleEntry(StrictConfig):
     )
     start_node: str | None = Field(default=None, description="layout node it starts parked on")
     battery_pct: float = Field(default=80.0, ge=0, le=100)
+    battery_wh: float = Field(
+        default=1000.0,
+        gt=0,
+        le=1e7,
+        description="energy at 100 % charge (Wh): a robot with a dynamics: block drains it by "
+        "its motors' power; without one the charge drains by distance",
+    )
 
 
 class Vda5050Config(StrictConfig):

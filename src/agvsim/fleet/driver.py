@@ -9,6 +9,7 @@ import numpy as np
 from agvsim.control.api import BatchObservation
 from agvsim.fleet.bank import VehicleBank, run_tick
 from agvsim.fleet.vehicle import Vehicle
+from agvsim.sim.engine import Simulation
 
 
 class FleetDriver:
@@ -30,6 +31,14 @@ class FleetDriver:
         self._publish = np.zeros(n, dtype=np.bool_)
         self._no_ranges = np.full(n, np.inf)
         self.python_ticks = 0  # vehicle ticks that ran in Python (for benchmarks)
+        self._power: tuple[Simulation, np.ndarray, np.ndarray] | None = None
+
+    def watch_power(self, sim: Simulation, robots: Sequence[int]) -> None:
+        """Vehicles whose robot has dynamics drain their battery by the energy their motors
+        deliver: each step adds the last step's positive wheel power times dt_s."""
+        dyn = [j for j, v in enumerate(self.vehicles) if v.spec.dynamics is not None]
+        if dyn:
+            self._power = (sim, np.asarray(robots)[dyn], np.asarray(dyn))
 
     def reset(self, k: int, rng: np.random.Generator) -> None:
         if k != len(self.vehicles):
@@ -42,6 +51,10 @@ class FleetDriver:
         mail = self.bank.mail
         poses = np.ascontiguousarray(obs.true_pose, dtype=np.float64)
         out, slow, publish = self._out, self._slow, self._publish
+        if self._power is not None:
+            sim, robots, rows = self._power
+            power_w = np.maximum(sim.state.wheel_power_w[robots], 0.0).sum(axis=1)
+            self.bank.energy_j[rows] += power_w * sim.dt_s
         if self.batch:
             run_tick(self.bank, float(obs.t_s), poses, rmin, mail, out, slow, publish)
             for j in np.flatnonzero(publish):

@@ -42,7 +42,8 @@ MIN_TOLERANCE_RAD = 0.02
 MAX_INSTANT_STATES = 50
 # a vehicle's own values in a VehicleBank row (copied by ``Vehicle.bind``)
 ROW = (
-    "t_s pose twist dist_node_m next_control_s period_s next_wake_s quiet mail driving "
+    "t_s pose twist dist_node_m pct_per_j energy_j next_control_s period_s next_wake_s quiet "
+    "mail driving "
     "look_m tol_m next_node_s holonomic can_spin kmax min_r_m use_field front_m reaction_s "
     "decel_m_s2 margin_m half_width_m mount_m"
 ).split()
@@ -159,6 +160,7 @@ class Vehicle:
     def _init_row(self) -> None:
         b, k, c, m = self._b, self._k, self.cfg, self.mob
         b.period_s[k] = c.control_period_s
+        b.pct_per_j[k] = self.battery.pct_per_j
         b.holonomic[k], b.can_spin[k] = m.holonomic, m.can_spin
         b.kmax[k], b.min_r_m[k] = m.max_curvature_1_m, m.min_radius_m
         b.use_field[k] = self.lidar is not None and self._fields is None
@@ -293,7 +295,8 @@ class Vehicle:
             elif topic == "instantActions":
                 self._on_instant(payload)
         self._advance(dt)
-        self.battery.update(dt, moved)
+        self.battery.update(dt, moved, float(self._b.energy_j[self._k]))
+        self._b.energy_j[self._k] = 0.0
         tw = self._drive()
         violation = False
         if self._fields is not None:  # a safety scanner (safety: block): the engine brakes
