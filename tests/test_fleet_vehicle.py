@@ -96,7 +96,9 @@ def test_full_order_every_model(tmp_path: Path, model: str) -> None:
     assert r.last_state()["actionStates"][0]["actionStatus"] == "RUNNING"
     r.until(lambda: r.v().order_actions["pick1"].status == "FINISHED", 3, "pick")
     s = r.last_state()
-    assert s["loads"] == [{"loadId": "L7", "loadPosition": "LHD1", "loadType": "EPAL"}]
+    assert s["loads"] == [
+        {"loadId": "L7", "loadPosition": "LHD1", "loadType": "EPAL", "weight": 50.0}
+    ]  # the default load_kg: the action gave no weight
     assert s["nodeStates"] == [] and s["edgeStates"] == [] and not s["driving"]
     assert s["errors"] == []
 
@@ -505,3 +507,29 @@ def test_a_vehicle_with_dynamics_drains_its_battery_by_motor_energy(tmp_path: Pa
     used = c0 - b.charge_pct
     expected = b.idle_pct_s * v.t_s + b.pct_per_j * (energy - left)
     assert used == pytest.approx(expected, rel=1e-9)
+
+
+def test_a_picked_load_weighs_on_a_vehicle_with_dynamics(tmp_path: Path) -> None:
+    """pick with a 'weight' makes the robot that much heavier (mass, and a longer
+    friction-and-torque-limited stop); drop takes it off again."""
+    path = room_scenario(tmp_path, [("agv1", "differential", "r4c1", 0.0)])
+    text = path.read_text().replace(
+        "    sensors:\n",
+        "    dynamics: {mass_kg: 60, motor: {gear_ratio: 20, torque_max_nm: 1.5}}\n    sensors:\n",
+        1,
+    )
+    path.write_text(text)
+    r = Run(build_fleet(load_scenario(path), epoch=EPOCH))
+    dyn = r.sim.dynamics
+    assert dyn is not None
+    m0, stop0 = float(dyn.mass_kg()[0]), dyn.stopping_distance_m(0, 1.0)
+    acts = {"r4c2": [action("p", "pick", weight=120)], "r4c3": [action("d", "drop")]}
+    r.v().receive("order", order(r.fleet.layout, ROW4[:3], node_actions=acts))
+    r.until(lambda: bool(r.v().loads), 20, "the pick")
+    r.step()  # the driver hands the load to the dynamics at its next step
+    assert r.last_state()["loads"][0]["weight"] == 120.0
+    assert float(dyn.mass_kg()[0]) == pytest.approx(m0 + 120.0)
+    assert dyn.stopping_distance_m(0, 1.0) > stop0 * 1.5  # torque-limited: 180 kg vs 60 kg
+    r.until(lambda: not r.v().loads, 20, "the drop")
+    r.step()
+    assert float(dyn.mass_kg()[0]) == pytest.approx(m0)

@@ -133,6 +133,7 @@ def build_fleet(sc: Scenario, epoch: datetime | None = None, seed: int | None = 
             state_period_s=cfg.state_period_s,
             vis_period_s=cfg.visualization_period_s,
             action_durations={"pick": cfg.pick_time_s, "drop": cfg.drop_time_s},
+            load_kg=v.load_kg,
         )
         battery = (
             Battery(v.battery_pct)

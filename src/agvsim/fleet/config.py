@@ -37,6 +37,13 @@ class VehicleEntry(StrictConfig):
     )
     start_node: str | None = Field(default=None, description="layout node it starts parked on")
     battery_pct: float = Field(default=80.0, ge=0, le=100)
+    load_kg: float = Field(
+        default=50.0,
+        ge=0,
+        le=100_000,
+        description="mass of a picked load whose pick action gives no 'weight' (kg): carried "
+        "by a robot with a dynamics: block, it changes its mass and braking",
+    )
     battery_wh: float = Field(
         default=1000.0,
         gt=0,

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from agvsim.control.api import BatchObservation
+from agvsim.dynamics.spec import LoadSpec
 from agvsim.fleet.bank import VehicleBank, run_tick
 from agvsim.fleet.vehicle import Vehicle
 from agvsim.sim.engine import Simulation
@@ -32,6 +33,7 @@ class FleetDriver:
         self._no_ranges = np.full(n, np.inf)
         self.python_ticks = 0  # vehicle ticks that ran in Python (for benchmarks)
         self._power: tuple[Simulation, np.ndarray, np.ndarray] | None = None
+        self._carried: dict[int, float] = {}  # vehicle row -> load mass applied (dynamics)
 
     def watch_power(self, sim: Simulation, robots: Sequence[int]) -> None:
         """Vehicles whose robot has dynamics drain their battery by the energy their motors
@@ -39,6 +41,27 @@ class FleetDriver:
         dyn = [j for j, v in enumerate(self.vehicles) if v.spec.dynamics is not None]
         if dyn:
             self._power = (sim, np.asarray(robots)[dyn], np.asarray(dyn))
+            self._carried = dict.fromkeys(dyn, 0.0)
+
+    def _carry(self, sim: Simulation, robots: np.ndarray, rows: np.ndarray) -> None:
+        """A vehicle with dynamics that picked or dropped a load: its robot's load becomes the
+        scenario's plus the loads on board, at the footprint centre (mass, centre of mass,
+        inertia and braking follow from the next step)."""
+        assert sim.dynamics is not None
+        for r, j in zip(robots, rows, strict=True):
+            v = self.vehicles[j]
+            kg = v.load_kg
+            if kg == self._carried[j]:
+                continue
+            self._carried[j] = kg
+            spec = v.spec.dynamics
+            assert spec is not None
+            base = spec.load
+            m = base.mass_kg + kg
+            cx = v.spec.body_offset_x_m
+            x = (base.mass_kg * base.offset_xy_m[0] + kg * cx) / m if m > 0 else 0.0
+            y = base.mass_kg * base.offset_xy_m[1] / m if m > 0 else 0.0
+            sim.dynamics.set_load(int(r), LoadSpec(m, (x, y)))
 
     def reset(self, k: int, rng: np.random.Generator) -> None:
         if k != len(self.vehicles):
@@ -55,6 +78,7 @@ class FleetDriver:
             sim, robots, rows = self._power
             power_w = np.maximum(sim.state.wheel_power_w[robots], 0.0).sum(axis=1)
             self.bank.energy_j[rows] += power_w * sim.dt_s
+            self._carry(sim, robots, rows)
         if self.batch:
             run_tick(self.bank, float(obs.t_s), poses, rmin, mail, out, slow, publish)
             for j in np.flatnonzero(publish):

@@ -49,6 +49,15 @@ ROW = (
 ).split()
 
 
+def _weight(value: Any, default_kg: float) -> float:
+    """A pick action's ``weight`` parameter (kg) when it is a number >= 0, else the default."""
+    try:
+        w = float(value)
+    except (TypeError, ValueError):
+        return default_kg
+    return w if math.isfinite(w) and 0 <= w <= 1e5 else default_kg
+
+
 def _reach(node: OrderNode) -> float:
     """How close to a stop node counts as there (m)."""
     return max(MIN_TOLERANCE_M, node.dev_xy_m)
@@ -72,6 +81,7 @@ class VehicleConfig:
     field_margin_m: float = 0.15  # length margin
     field_side_margin_m: float = 0.05  # and width margin beside the body
     limits: Limits = field(default_factory=Limits)
+    load_kg: float = 50.0  # a picked load's mass when its pick action gives no 'weight'
     action_durations: dict[str, float] = field(default_factory=dict)
 
 
@@ -376,6 +386,11 @@ class Vehicle:
         self._settle()
 
     @property
+    def load_kg(self) -> float:
+        """The mass of the loads on board (kg)."""
+        return float(sum(ld.get("weight", 0.0) for ld in self.loads))
+
+    @property
     def busy(self) -> bool:
         """Executing an order or waiting for its continuation (VDA 5050 6.6.2 step 3)."""
         return bool(self.route_nodes) or any(
@@ -589,12 +604,13 @@ class Vehicle:
         kind, lhd = a.action_type, str(a.params.get("lhd", "LHD1"))
         if kind == "pick":
             self._loads_made += 1
-            load = {
+            load: dict[str, Any] = {
                 "loadId": str(a.params.get("loadId", f"{self.cfg.serial}-{self._loads_made}")),
                 "loadPosition": lhd,
             }
             if "loadType" in a.params:
                 load["loadType"] = str(a.params["loadType"])
+            load["weight"] = _weight(a.params.get("weight"), self.cfg.load_kg)
             self.loads.append(load)
         elif kind == "drop":
             self.loads = [ld for ld in self.loads if ld.get("loadPosition") != lhd]
