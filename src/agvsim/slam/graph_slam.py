@@ -44,6 +44,7 @@ from agvsim.slam.loop_closure import (
 from agvsim.slam.mapping import OccupancyMap, render_occupancy
 from agvsim.slam.memory import release_free_heap
 from agvsim.slam.posegraph import PoseGraph, edge_chi2, optimize
+from agvsim.slam.posegraph_graduated import graduated_scales
 from agvsim.slam.relocalise import global_search
 from agvsim.slam.se2 import between, compose, inverse
 
@@ -454,14 +455,10 @@ class GraphSlam:
     def switch_stages(self, mask: NDArray[np.bool_]) -> list[float]:
         """Switch scales (std) to optimise with in turn: from one that keeps every closure
         whole at the current poses down to ``switch_scale``, divided by
-        ``switch_stage_factor`` in chi2 per stage (graduated non-convexity)."""
-        final = self.cfg.switch_scale**2
+        ``switch_stage_factor`` in chi2 per stage (graduated non-convexity,
+        :func:`~.posegraph_graduated.graduated_scales`)."""
         worst = float(edge_chi2(self.graph)[mask].max()) if mask.any() else 0.0
-        stages = []
-        while worst > final:
-            stages.append(math.sqrt(worst))
-            worst /= self.cfg.switch_stage_factor
-        return [*stages, math.sqrt(final)]
+        return graduated_scales(worst, self.cfg.switch_scale, self.cfg.switch_stage_factor)
 
     def optimise(self, max_iterations: int = 20) -> None:
         """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed),
