@@ -25,7 +25,13 @@ from numpy.typing import NDArray
 
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.fusion import OdometryFusion
-from agvsim.slam.mapping import gaussian_kernel, likelihood_field, stamp_points, update_log_odds
+from agvsim.slam.mapping import (
+    coarse_field,
+    gaussian_kernel,
+    likelihood_field,
+    stamp_points,
+    update_log_odds,
+)
 from agvsim.slam.odometry_check import DoubtConfig, OdometryCheck
 from agvsim.slam.se2 import between, compose
 
@@ -70,7 +76,10 @@ class TrackingConfig:
     lost_scans: int = 3
     relocalise_window_m: float = 2.0  # relocalisation search: +- this, all headings
     global_min_score: float = 0.7  # global relocalisation (all submaps) accepted from this score
-    global_points: int = 96  # scan points the global search places (then all are refined)
+    global_points: int = 48  # scan points the global search places (then all are refined)
+    # a finished submap keeps its field max-pooled over this many cells a side for the global
+    # search (20 cm cells; .relocalise), built once; 0: no global search over it
+    global_cell_factor: int = 4
 
 
 @njit(cache=True)
@@ -131,6 +140,10 @@ class Submap:
     grid_shape: tuple[int, int] = (0, 0)
     field_sigma_m: float = 0.0
     field_resolution_m: float = 0.0
+    # the field max-pooled over coarse_factor cells a side and dilated by one coarse cell
+    # (uint8, rounded up; :func:`~.mapping.coarse_field`): the global relocalisation's bound
+    coarse: NDArray[np.uint8] | None = None
+    coarse_factor: int = 0
 
     def field(self) -> F32:
         """The likelihood field for matching (rebuilt from the occupied cells once finished)."""
@@ -180,6 +193,9 @@ class Submap:
         self.occupied_cells = np.argwhere(occ).astype(np.int16)
         self.grid_shape = (int(occ.shape[0]), int(occ.shape[1]))
         self.field_sigma_m, self.field_resolution_m = cfg.sigma_m, cfg.resolution_m
+        if cfg.global_cell_factor > 0:
+            self.coarse = coarse_field(self.field(), cfg.global_cell_factor)
+            self.coarse_factor = cfg.global_cell_factor
         empty = np.zeros((0, 0), np.float32)
         self.likelihood, self.logodds = empty, empty  # the log-odds are not needed any more
         self.finished = True

@@ -44,6 +44,8 @@ from agvsim.slam.loop_closure import (
 from agvsim.slam.mapping import OccupancyMap, render_occupancy
 from agvsim.slam.memory import release_free_heap
 from agvsim.slam.posegraph import PoseGraph, edge_chi2, optimize
+from agvsim.slam.posegraph_graduated import graduated_scales
+from agvsim.slam.relocalise import global_search
 from agvsim.slam.se2 import between, compose, inverse
 
 __all__ = ["GraphSlam", "SlamConfig"]
@@ -263,10 +265,8 @@ class GraphSlam:
         """Search step that moves the scan's far points (98th percentile of the ranges, at least
         3 m) by about one cell (:func:`~.scan_matching.angular_step`): a few far points need
         not set a fine step for all, Gauss-Newton refines the angle."""
-        r = np.hypot(points[:, 0], points[:, 1])
-        k = int(0.98 * (len(r) - 1))
-        r_ref = float(np.partition(r, k)[k]) if len(r) else self.max_range_m
-        return sm.angular_step(self.cfg.tracking.resolution_m, max(r_ref, 3.0))
+        r_ref = _reference_range(points) if len(points) else max(self.max_range_m, 3.0)
+        return sm.angular_step(self.cfg.tracking.resolution_m, r_ref)
 
     def add_keyframe(
         self, pose: F64, points: F64, ends: NDArray[np.float32], hits: NDArray[np.bool_]
@@ -366,48 +366,36 @@ class GraphSlam:
         return self.cfg.global_relocalisation and (lost - n) % (10 * n) == 0
 
     def relocalise(self, points: F64, local: F64, local_score: float) -> tuple[F64, int] | None:
-        """Global relocalisation when tracking is lost: branch and bound of a subsample of the
-        scan's points (``tracking.global_points``) over the whole area of every finished
-        submap and every heading, the best place over all submaps (each search is pruned by
-        the best score so far), then all points refined there. Accepted only when the whole
-        scan scores at least ``tracking.global_min_score``, better than at the tracked pose
-        ``local`` (score ``local_score``) by ``doubt.margin``, and lies away from it (more
-        than ``relocalise_window_m``: nearer, tracking's own search had its chance). Returns
-        the local pose and the submap, or None."""
+        """Global relocalisation when tracking is lost: a subsample of the scan's points
+        (``tracking.global_points``) looked for over the whole area of every finished submap
+        and every heading, coarse to fine (:func:`~.relocalise.global_search`), then all points
+        refined there. Accepted only when the whole scan scores at least
+        ``tracking.global_min_score``, better than at the tracked pose ``local`` (score
+        ``local_score``) by ``doubt.margin``, and lies away from it (more than
+        ``relocalise_window_m``: nearer, tracking's own search had its chance). Returns the
+        local pose and the submap, or None."""
         cfg = self.cfg.tracking
         finished = [s for s in self.tracker.submaps if s.finished]
         if not finished or len(points) < 3:
             return None
         sub = points[:: max(1, len(points) // cfg.global_points)]
-        coarse = 2.0 * self.angular_step(points)
         res = cfg.resolution_m
-        best: tuple[F64, Submap] | None = None
-        best_score = 0.5 * cfg.global_min_score  # the subsample's bound to beat
-        for s in finished:
-            pyr = self.loops.pyramid(s)
-            h, w = pyr.shape[1:]
-            centre = np.array([s.ox + 0.5 * w * res, s.oy + 0.5 * h * res, 0.0])
-            pose, score = sm.branch_and_bound(
-                pyr,
-                s.ox,
-                s.oy,
-                res,
-                sub,
-                centre,
-                0.5 * max(h, w) * res,
-                math.pi,
-                coarse,
-                best_score,
-            )
-            if score > best_score:
-                best, best_score = (pose, s), score
-        if best is None:
+        found = global_search(
+            finished,
+            sub,
+            res,
+            _reference_range(points),
+            0.5 * cfg.global_min_score,  # the subsample's bound to beat
+            self.loops.pyramid,
+        )
+        if found is None:
             return None
-        pose, s = best
+        s = self.tracker.submaps[found.submap]
         pyr = self.loops.pyramid(s)
+        coarse = 2.0 * self.angular_step(points)
         step = self.angular_step(points)
         pose, _ = sm.branch_and_bound(
-            pyr, s.ox, s.oy, res, points, pose, 2 * res, coarse, step, 0.0
+            pyr, s.ox, s.oy, res, points, found.pose, 2 * res, coarse, step, 0.0
         )
         pose, score, _ = sm.gauss_newton(
             pyr[0], s.ox, s.oy, res, points, pose, cfg.gn_iterations, 0.0
@@ -467,14 +455,10 @@ class GraphSlam:
     def switch_stages(self, mask: NDArray[np.bool_]) -> list[float]:
         """Switch scales (std) to optimise with in turn: from one that keeps every closure
         whole at the current poses down to ``switch_scale``, divided by
-        ``switch_stage_factor`` in chi2 per stage (graduated non-convexity)."""
-        final = self.cfg.switch_scale**2
+        ``switch_stage_factor`` in chi2 per stage (graduated non-convexity,
+        :func:`~.posegraph_graduated.graduated_scales`)."""
         worst = float(edge_chi2(self.graph)[mask].max()) if mask.any() else 0.0
-        stages = []
-        while worst > final:
-            stages.append(math.sqrt(worst))
-            worst /= self.cfg.switch_stage_factor
-        return [*stages, math.sqrt(final)]
+        return graduated_scales(worst, self.cfg.switch_scale, self.cfg.switch_stage_factor)
 
     def optimise(self, max_iterations: int = 20) -> None:
         """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed),
@@ -535,6 +519,14 @@ class GraphSlam:
     @property
     def submaps(self) -> list[Submap]:
         return self.tracker.submaps
+
+
+def _reference_range(points: F64) -> float:
+    """The range (m) that sets a scan's angular search steps: the 98th percentile of its
+    points' ranges, at least 3 m."""
+    r = np.hypot(points[:, 0], points[:, 1])
+    k = int(0.98 * (len(r) - 1))
+    return max(float(np.partition(r, k)[k]), 3.0) if len(r) else 3.0
 
 
 def _xy0(xy: NDArray[np.floating]) -> F64:

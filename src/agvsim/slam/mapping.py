@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "OccupancyMap",
+    "coarse_field",
     "gaussian_kernel",
     "likelihood_field",
     "render_occupancy",
@@ -243,3 +244,30 @@ def save_map_png(grid: OccupancyMap, path: str | Path) -> Path:
     img[lo == 0] = 205
     Image.fromarray(img).save(p, format="PNG")
     return p
+
+
+@njit(cache=True)
+def _block_max(field: np.ndarray, factor: int) -> np.ndarray:
+    """``max`` of ``field`` over each ``factor x factor`` block, as ``ceil(255 v)``."""
+    h, w = field.shape
+    hc, wc = (h + factor - 1) // factor, (w + factor - 1) // factor
+    pooled = np.zeros((hc, wc), np.float32)
+    for iy in range(h):
+        for ix in range(w):
+            by, bx = iy // factor, ix // factor
+            if field[iy, ix] > pooled[by, bx]:
+                pooled[by, bx] = field[iy, ix]
+    out = np.zeros((hc, wc), np.uint8)
+    for by in range(hc):
+        for bx in range(wc):
+            out[by, bx] = min(255, int(math.ceil(pooled[by, bx] * 255.0)))
+    return out
+
+
+def coarse_field(field: NDArray[np.floating], factor: int) -> NDArray[np.uint8]:
+    """The coarse field ``(ceil(H / factor), ceil(W / factor))`` of a likelihood field in
+    [0, 1]: the maximum over each ``factor x factor`` block as ``ceil(255 v)`` (at least the
+    field anywhere in the block). Its corner is the field's corner."""
+    if factor < 1:
+        raise ValueError(f"coarse factor must be a whole number >= 1, got {factor}")
+    return _block_max(np.ascontiguousarray(field, dtype=np.float32), int(factor))
