@@ -69,8 +69,8 @@ class Checked(InProcessRun):
         m.tick = orig  # type: ignore[method-assign]
         xy = self.fleet.sim.state.poses[:, :2]
         if len(xy) > 1:
-            pairs = itertools.combinations(range(len(xy)), 2)
-            d = min(float(np.hypot(*(xy[i] - xy[j]))) for i, j in pairs)
+            i, j = np.triu_indices(len(xy), 1)  # every pair once
+            d = float(np.hypot(*(xy[i] - xy[j]).T).min())
             self.closest_m = min(self.closest_m, d)
 
 
@@ -323,21 +323,23 @@ def driven_routes(orders: list[dict]) -> list[list[str]]:
 
 
 @pytest.mark.slow
-def test_mixed_fleet_of_twenty_one_hour() -> None:
+def test_mixed_fleet_of_twenty_half_an_hour() -> None:
     """warehouse_operations.yaml as shipped: 20 vehicles of five models (three Ackermann
-    vehicles that cannot turn on the spot), orders for 55 minutes, a breakdown at 900 s. No
-    contact, deadlock or stall; every order placed in the first 50 minutes delivered within
-    the hour; the car-like vehicles never double back and take only turns their lock allows."""
+    vehicles that cannot turn on the spot), a breakdown at 900 s; its first half hour (the
+    whole hour is measured in docs/master.md; the ten-vehicle test above runs an hour). No
+    contact, deadlock or stall; every order placed in the first 25 minutes delivered within
+    the half hour; the car-like vehicles never double back and take only turns their lock
+    allows."""
     sc = load_scenario(ROOT / "scenarios" / "warehouse_operations.yaml")
-    r = Checked(sc, seed=0, duration_s=3600, master_period_s=0.25, validate_every=50)
+    r = Checked(sc, seed=0, duration_s=1800, master_period_s=0.25, validate_every=50)
     r.run()
     s = r.summary()
     m = r.master
     assert len(m.agvs) == 20 and s["breakdowns"] == 1
     assert (s["collisions"], s["deadlocks"], s["stalls"]) == (0, 0, 0), s
     assert r.fleet.sim.state.wall_collisions.sum() == 0
-    early = [t for t in m.transports if t.created_s <= 3000]
-    assert len(early) > 150
+    early = [t for t in m.transports if t.created_s <= 1500]
+    assert len(early) > 75  # 240 an hour
     assert all(t.delivered_s is not None for t in early), [t for t in early if not t.delivered_s]
     cars = [a for a in m.agvs.values() if a.turn_radius_m > 0]
     assert sorted(a.serial for a in cars) == ["agv11", "agv12", "agv13"]
@@ -350,7 +352,7 @@ def test_mixed_fleet_of_twenty_one_hour() -> None:
             for x, y in itertools.pairwise(arcs):
                 assert turn_fits(a.turn_radius_m, x.heading_end_rad, y, x.length_m), nodes
             driven += len(arcs)
-    assert driven > 100  # they did work
+    assert driven > 40  # they did work
     for orders in r.orders.values():
         assert_base_and_horizon(orders)
 
