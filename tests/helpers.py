@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -53,6 +53,22 @@ def wait_for(cond: Callable[[], object], timeout_s: float = 15.0, what: str = "c
             return
         time.sleep(0.05)
     raise AssertionError(f"timed out waiting for {what}")
+
+
+def room_yaml(sensors: Sequence[str] = (), wheels_rad_s: float = 5.0, more: str = "") -> str:
+    """The browser tests' scenario: a walled 7 x 7 m room, robot ``agv`` (differential, forward
+    mode, at (-2, 0) facing east) driving both wheels at ``wheels_rad_s`` with ``sensors``
+    (YAML flow mappings), and ``more`` robot entries appended."""
+    rows = "\n".join(["    #########", *["    #.......#"] * 7, "    #########"])
+    listed = "".join(f"\n      - {x}" for x in sensors)
+    return (
+        f"name: room\nworld:\n  picture: |\n{rows}\nrobots:\n  - name: agv\n"
+        "    model: differential\n    mode: forward\n"
+        "    pose: {x_m: -2.0, y_m: 0.0, theta_deg: 0.0}\n"
+        + (f"    sensors:{listed}\n" if sensors else "")
+        + "    controller: {type: script, steps: [{duration_s: 10000, "
+        f"wheels: [{wheels_rad_s}, {wheels_rad_s}]}}]}}\n" + more
+    )
 
 
 @contextmanager

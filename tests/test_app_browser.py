@@ -11,31 +11,11 @@ import io
 import numpy as np
 import pytest
 
-from helpers import chromium, served_app, wait_for
+from helpers import chromium, room_yaml, served_app, wait_for
 
 pytestmark = pytest.mark.slow  # a real browser
 
-ROOM = """\
-name: room
-world:
-  picture: |
-    #########
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #########
-robots:
-  - name: agv
-    model: differential
-    mode: forward
-    pose: {x_m: -2.0, y_m: 0.0, theta_deg: 0.0}
-    sensors: [{type: lidar, beams: 8, range_max_m: 10.0, rate_hz: 50}]
-    controller: {type: script, steps: [{duration_s: 100, wheels: [5.0, 5.0]}]}
-"""
+ROOM = room_yaml(["{type: lidar, beams: 8, range_max_m: 10.0, rate_hz: 50}"])
 
 
 @pytest.fixture(scope="module")

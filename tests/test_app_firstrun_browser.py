@@ -13,39 +13,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import chromium, served_app, wait_for
+from helpers import chromium, room_yaml, served_app, wait_for
 
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-ROOM = """\
-name: room
-world:
-  picture: |
-    #########
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #########
-robots:
-  - name: agv
-    model: differential
-    mode: forward
-    pose: {x_m: -2.0, y_m: 0.0, theta_deg: 0.0}
-    sensors:
-      - {type: lidar, beams: 8, range_max_m: 10.0, rate_hz: 50}
-      - {type: camera, width_px: 64, height_px: 48, mount_x_m: 0.2, mount_z_m: 0.5}
-    controller: {type: script, steps: [{duration_s: 10000, wheels: [1.0, 1.0]}]}
+ROOM = room_yaml(
+    [
+        "{type: lidar, beams: 8, range_max_m: 10.0, rate_hz: 50}",
+        "{type: camera, width_px: 64, height_px: 48, mount_x_m: 0.2, mount_z_m: 0.5}",
+    ],
+    wheels_rad_s=1.0,
+    more="""\
   - name: other
     model: differential
     pose: {x_m: 2.0, y_m: 2.0, theta_deg: 90.0}
     sensors: [{type: rangers}]
     controller: {type: script, steps: [{duration_s: 10000, twist: [0.0, 0.0]}]}
-"""
+""",
+)
 
 
 @pytest.fixture(scope="module")

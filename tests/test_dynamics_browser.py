@@ -7,30 +7,11 @@ from __future__ import annotations
 
 import pytest
 
-from helpers import chromium, served_app, wait_for
+from helpers import chromium, room_yaml, served_app, wait_for
 
 pytestmark = pytest.mark.slow  # a real browser
 
-ROOM = """\
-name: room
-world:
-  picture: |
-    #########
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #.......#
-    #########
-robots:
-  - name: agv
-    model: differential
-    mode: forward
-    pose: {x_m: -2.0, y_m: 0.0, theta_deg: 0.0}
-    controller: {type: script, steps: [{duration_s: 100, wheels: [5.0, 5.0]}]}
-"""
+ROOM = room_yaml()
 
 
 @pytest.fixture(scope="module")
