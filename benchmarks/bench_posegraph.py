@@ -30,6 +30,7 @@ import numpy as np
 
 from agvsim.slam.datasets import datasets_dir
 from agvsim.slam.g2o import load_g2o
+from agvsim.slam.perturb import with_false_closures
 from agvsim.slam.posegraph import PoseGraph, chi2, optimize
 from agvsim.slam.posegraph_graduated import optimize_graduated, optimize_switchable
 from agvsim.slam.posegraph_init import odometry_chain_poses
@@ -66,23 +67,6 @@ def bench(
         "load_s": load_s,
         "optimize_s": t2 - t1,
     }
-
-
-def with_false_closures(graph: PoseGraph, n: int, seed: int) -> tuple[PoseGraph, np.ndarray]:
-    """The graph plus ``n`` false closures and the switchable flags (edges not between
-    consecutive nodes, and the false ones)."""
-    rng = np.random.default_rng(seed)
-    i, j = rng.integers(0, graph.n_nodes, n), rng.integers(0, graph.n_nodes, n)
-    ok = np.abs(i - j) > 1
-    i, j = i[ok], j[ok]
-    z = np.column_stack(
-        [rng.uniform(-5, 5, i.size), rng.uniform(-5, 5, i.size), rng.uniform(-3, 3, i.size)]
-    )
-    loop = np.abs(graph.edge_i - graph.edge_j) != 1
-    info = graph.information[loop][rng.integers(0, int(loop.sum()), i.size)]
-    bad = graph.copy()
-    bad.add_edges(i, j, z, info)
-    return bad, np.concatenate([loop, np.ones(i.size, dtype=bool)])
 
 
 def bench_false_closures(name: str, graph: PoseGraph, n: int, known: float) -> None:

@@ -12,9 +12,9 @@ from test_switchable import (
     assert_poses_close,
     load_graph,
     square_loop,
-    with_false_closures,
 )
 
+from agvsim.slam.perturb import with_false_closures
 from agvsim.slam.posegraph import chi2, optimize
 from agvsim.slam.posegraph_graduated import (
     graduated_scales,

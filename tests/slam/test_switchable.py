@@ -15,6 +15,7 @@ from agvsim.slam.datasets import datasets_dir
 from agvsim.slam.g2o import load_g2o
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.loop_closure import LoopClosure
+from agvsim.slam.perturb import with_false_closures
 from agvsim.slam.posegraph import PoseGraph, chi2, optimize
 from agvsim.slam.posegraph_init import odometry_chain_poses
 from agvsim.slam.robust import RobustKernel, robust_cost_and_weights, switch_values
@@ -92,24 +93,6 @@ def test_false_closure_is_switched_off_in_a_small_graph() -> None:
         optimize(g, switchable=switchable[:-1])
     with pytest.raises(ValueError, match="switch_scale"):
         optimize(g, switchable=switchable, switch_scale=0.0)
-
-
-def with_false_closures(graph: PoseGraph, n: int, seed: int) -> tuple[PoseGraph, np.ndarray]:
-    """The graph plus ``n`` false loop closures between random nodes (random relative poses,
-    up to 5 m and any heading, as sure as the graph's own closures) and the switchable flags
-    (every edge that is not between consecutive nodes)."""
-    rng = np.random.default_rng(seed)
-    i, j = rng.integers(0, graph.n_nodes, n), rng.integers(0, graph.n_nodes, n)
-    keep = np.abs(i - j) > 1
-    i, j = i[keep], j[keep]
-    z = np.column_stack(
-        [rng.uniform(-5, 5, i.size), rng.uniform(-5, 5, i.size), rng.uniform(-3, 3, i.size)]
-    )
-    loop = np.abs(graph.edge_i - graph.edge_j) != 1
-    info = graph.information[loop][rng.integers(0, int(loop.sum()), i.size)]
-    bad = graph.copy()
-    bad.add_edges(i, j, z, info)
-    return bad, np.concatenate([loop, np.ones(i.size, dtype=bool)])
 
 
 def load_graph(name: str) -> PoseGraph:

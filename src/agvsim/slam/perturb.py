@@ -13,6 +13,8 @@ Each :class:`Fault` turns a stream of :class:`~agvsim.scan.LaserScan` into anoth
 
 Odometry faults act on the increments between consecutive scans, ``u_k = o_{k-1}^-1 o_k``,
 and compose the faulty increments again from the first scan's pose.
+
+``with_false_closures`` is the pose-graph fault: wrong loop closures added to a graph.
 """
 
 from __future__ import annotations
@@ -25,9 +27,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from agvsim.scan import LaserScan
+from agvsim.slam.posegraph import PoseGraph
 from agvsim.slam.se2 import between, compose
 
-__all__ = ["Fault", "FaultConfig", "apply_fault"]
+__all__ = ["Fault", "FaultConfig", "apply_fault", "with_false_closures"]
 
 
 class Fault(enum.StrEnum):
@@ -137,3 +140,21 @@ def _odometry(scan: LaserScan) -> np.ndarray:
     if scan.odom_pose is None:
         raise ValueError(f"the scan at {scan.stamp_s} s has no odometry pose")
     return scan.odom_pose
+
+
+def with_false_closures(graph: PoseGraph, n: int, seed: int) -> tuple[PoseGraph, np.ndarray]:
+    """The graph plus ``n`` false loop closures between random nodes (random relative poses,
+    up to 5 m and any heading, as sure as the graph's own closures) and the switchable flags
+    (every edge that is not between consecutive nodes, the false ones included)."""
+    rng = np.random.default_rng(seed)
+    i, j = rng.integers(0, graph.n_nodes, n), rng.integers(0, graph.n_nodes, n)
+    keep = np.abs(i - j) > 1
+    i, j = i[keep], j[keep]
+    z = np.column_stack(
+        [rng.uniform(-5, 5, i.size), rng.uniform(-5, 5, i.size), rng.uniform(-3, 3, i.size)]
+    )
+    loop = np.abs(graph.edge_i - graph.edge_j) != 1
+    info = graph.information[loop][rng.integers(0, int(loop.sum()), i.size)]
+    bad = graph.copy()
+    bad.add_edges(i, j, z, info)
+    return bad, np.concatenate([loop, np.ones(i.size, dtype=bool)])
