@@ -5,6 +5,20 @@ from __future__ import annotations
 import numpy as np
 
 
+class _Cell:
+    """A float attribute kept in a one-element array (``_<name>``): a view into a bank row
+    once bound, so the batch tick and the object share one value."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.slot = "_" + name
+
+    def __get__(self, obj: object, objtype: type | None = None) -> float:
+        return float(getattr(obj, self.slot)[0])
+
+    def __set__(self, obj: object, value: float) -> None:
+        getattr(obj, self.slot)[0] = value
+
+
 class Battery:
     """``charge_pct`` in [0, 100]. Per second: -idle_pct_s, -drive_pct_m per metre driven,
     +charge_pct_s while charging (and only then). A robot with dynamics drains by energy
@@ -23,41 +37,21 @@ class Battery:
         charging: bool = False,
         pct_per_j: float = 0.0,
     ):
-        self._charge = np.array([float(charge_pct)])
-        self._idle = np.array([float(idle_pct_s)])
-        self._drive = np.array([float(drive_pct_m)])
+        self._charge_pct = np.array([float(charge_pct)])
+        self._idle_pct_s = np.array([float(idle_pct_s)])
+        self._drive_pct_m = np.array([float(drive_pct_m)])
         self.charge_pct_s = charge_pct_s
         self.charging = charging
         self.pct_per_j = pct_per_j
 
+    charge_pct = _Cell()
+    idle_pct_s = _Cell()
+    drive_pct_m = _Cell()
+
     def bind(self, charge: np.ndarray, idle: np.ndarray, drive: np.ndarray) -> None:
         """Keep the charge and the drain rates in these (1,) views from now on."""
-        charge[0], idle[0], drive[0] = self._charge[0], self._idle[0], self._drive[0]
-        self._charge, self._idle, self._drive = charge, idle, drive
-
-    @property
-    def charge_pct(self) -> float:
-        return float(self._charge[0])
-
-    @charge_pct.setter
-    def charge_pct(self, value: float) -> None:
-        self._charge[0] = value
-
-    @property
-    def idle_pct_s(self) -> float:
-        return float(self._idle[0])
-
-    @idle_pct_s.setter
-    def idle_pct_s(self, value: float) -> None:
-        self._idle[0] = value
-
-    @property
-    def drive_pct_m(self) -> float:
-        return float(self._drive[0])
-
-    @drive_pct_m.setter
-    def drive_pct_m(self, value: float) -> None:
-        self._drive[0] = value
+        charge[0], idle[0], drive[0] = self.charge_pct, self.idle_pct_s, self.drive_pct_m
+        self._charge_pct, self._idle_pct_s, self._drive_pct_m = charge, idle, drive
 
     @classmethod
     def of_energy(cls, charge_pct: float, capacity_wh: float) -> Battery:
