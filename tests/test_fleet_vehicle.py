@@ -533,3 +533,11 @@ def test_a_picked_load_weighs_on_a_vehicle_with_dynamics(tmp_path: Path) -> None
     r.until(lambda: not r.v().loads, 20, "the drop")
     r.step()
     assert float(dyn.mass_kg()[0]) == pytest.approx(m0)
+
+
+def test_a_pick_weight_that_is_no_mass_falls_back_to_load_kg() -> None:
+    from agvsim.fleet.vehicle import _weight
+
+    assert _weight("120", 50.0) == 120.0 and _weight(7, 50.0) == 7.0
+    for bad in ("heavy", None, float("nan"), float("inf"), -1.0, 1e9, [3], {"kg": 3}):
+        assert _weight(bad, 50.0) == 50.0, bad
