@@ -21,7 +21,7 @@ from yaml import safe_load as yaml_load
 
 from agvsim.kinematics import DifferentialDrive
 from agvsim.runner import run_scenario
-from agvsim.signals import Terminated, hold_signals, terminate_as_interrupt
+from agvsim.signals import StepGuard, Terminated, hold_signals, terminate_as_interrupt
 from agvsim.sim.engine import Binding, ControllerError, Simulation
 from agvsim.sim.spec import RobotSpec, World
 from agvsim.sim.watchdog import ControllerClock, TimeLimitExceeded, check_limit
@@ -138,6 +138,31 @@ def test_a_controller_cannot_swallow_sigterm(tmp_path):
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # handler given back
 
 
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_in_the_middle_of_a_step_ends_the_run_after_it_whole(
+    tmp_path, monkeypatch, signum
+):
+    # a signal that comes while the step is half done (here: while the sensors are read, after
+    # the clock moved) waits until the step and its trajectory row are done: no row is lost
+    # and the summary's step count is the trajectory's
+    scen = _write(tmp_path, "def step(obs):\n    return (0.05, 0.0, 0.0)\n")
+    sense = Simulation._sense
+
+    def interrupted_sense(self, *args, **kwargs):
+        if self.state.step == 20:
+            signal.raise_signal(signum)
+        sense(self, *args, **kwargs)
+
+    monkeypatch.setattr(Simulation, "_sense", interrupted_sense)
+    with pytest.raises(KeyboardInterrupt):
+        run_scenario(scen, tmp_path / "out", plot=False, record_mcap=False)
+    run = _summary(tmp_path / "out")
+    assert run["status"] == "interrupted" and run["steps"] == 20
+    rows = _rows(tmp_path / "out")
+    assert len(rows) == run["steps"] + 1
+    assert float(rows[-1]["t"]) == pytest.approx(run["simulated_time_s"]) == pytest.approx(0.4)
+
+
 def test_sigterm_waits_while_outputs_are_written():
     order = []
     with pytest.raises(Terminated), terminate_as_interrupt() as stop:
@@ -159,6 +184,27 @@ def test_a_second_ctrl_c_breaks_through_a_hold():
             signal.raise_signal(signal.SIGINT)  # the user insists
             reached.append(2)
     assert reached == [1]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_step_guard_holds_only_while_holding_and_a_second_ctrl_c_breaks_through():
+    reached = []
+    with pytest.raises(KeyboardInterrupt), StepGuard() as guard:
+        guard.holding = True
+        signal.raise_signal(signal.SIGINT)
+        reached.append("held")
+        guard.release()  # delivered here
+        reached.append("never")
+    assert reached == ["held"]
+    with pytest.raises(KeyboardInterrupt), StepGuard() as guard:
+        guard.holding = True
+        signal.raise_signal(signal.SIGINT)
+        signal.raise_signal(signal.SIGINT)  # the user insists
+        reached.append("never")
+    with pytest.raises(KeyboardInterrupt), StepGuard():
+        signal.raise_signal(signal.SIGINT)  # not holding: at once
+        reached.append("never")
+    assert reached == ["held"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 

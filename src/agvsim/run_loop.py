@@ -9,6 +9,11 @@ each observer in order. An observer is anything with
 * ``close()``: called once when the run ends, however it ends (finished, a controller error,
   Ctrl-C), in the observers' order: each finishes its files then.
 
+Ctrl-C and SIGTERM end a run between steps: while the controllers decide (user code, which
+may hang) they break in at once and the state is still the last step's; during the rest of
+the step and its observers they wait (:class:`~agvsim.signals.StepGuard`), so every step the
+summary counts has its trajectory row and recording.
+
 An observer that records the state the run starts from does so when it is made (the MCAP
 recorder, the video writer, :class:`Rows`, agvsim.online_slam's ``OnlineSlam``), so the first
 ``on_step`` sees the state after the first step. The simulation knows nothing of its
@@ -20,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, Protocol
 
-from agvsim.signals import StopRequest, Terminated
+from agvsim.signals import StepGuard, StopRequest, Terminated
 from agvsim.sim.engine import Simulation
 
 __all__ = [
@@ -62,10 +67,14 @@ def run_loop(
     ``stop``: a SIGTERM whose exception a controller swallowed raises ``Terminated`` after the
     step. The caller closes the observers (:func:`close_all`)."""
     status = "completed"
-    with sim.enforcing_time_limit():
+    with sim.enforcing_time_limit(), StepGuard() as guard:
         for _ in range(n_steps):
-            sim.step()
-            if notify(observers, sim):
+            sim.control()  # user code: Ctrl-C and SIGTERM break in at once
+            guard.holding = True  # the rest of the step and its record as one: no half step
+            sim.advance()
+            ended = notify(observers, sim)
+            guard.release()
+            if ended:
                 status = "ended_by_metric"
                 break
             if stop is not None and stop.requested:

@@ -359,8 +359,21 @@ class Simulation:
 
     # ------------------------------------------------------------------ the step
     def step(self) -> None:
-        """Advance the simulation by one kinematics step of ``dt_s`` seconds."""
+        """Advance the simulation by one kinematics step of ``dt_s`` seconds: :meth:`control`
+        then :meth:`advance`."""
         self._control()
+        self.advance()
+
+    def control(self) -> None:
+        """The step's first stage: every controller decides its robot's command (the only
+        stage that runs user code, so the one an interruption may cut short; the state is then
+        still the last step's)."""
+        self._control()
+
+    def advance(self) -> None:
+        """The rest of the step after :meth:`control`: safety, actuation, dynamics, motion,
+        odometry, the clock, sensors and guidance. A caller that must never see half a step
+        runs this without interruptions (agvsim.run_loop holds Ctrl-C and SIGTERM)."""
         if self.safety is not None:
             self._guard()
         act = self._actuate()
