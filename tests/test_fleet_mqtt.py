@@ -113,7 +113,7 @@ def test_full_order_over_mqtt(tmp_path: Path, broker: str) -> None:
         run.close()
     pump_master = time.monotonic()
     while m.last("agv1", "connection")["connectionState"] != "OFFLINE":
-        assert time.monotonic() - pump_master < 5, "no OFFLINE"
+        assert time.monotonic() - pump_master < 30, "no OFFLINE"
         time.sleep(0.02)
     m.close()
 
