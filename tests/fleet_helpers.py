@@ -19,6 +19,11 @@ import pytest
 from agvsim.net import free_port
 from agvsim.world.lif import Layout
 
+# A wait for a message over MQTT is bounded to catch a hang, never to time the broker: the
+# bound a test names is what an idle machine needs, and a loaded one (the suite on every core,
+# other jobs) may take this many times as long.
+SLOW_MACHINE = 6.0
+
 STAMP = "2026-01-01T00:00:00.00Z"
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fleet_helpers import Master, order, room_scenario
+from fleet_helpers import SLOW_MACHINE, Master, order, room_scenario
 
 from agvsim.scenario import ScenarioError
 
@@ -38,7 +38,7 @@ def test_a_vda5050_scenario_served_by_the_app_takes_orders_over_mqtt(tmp_path: P
         def pump(cond, max_s: float, what: str) -> None:
             t0 = time.monotonic()
             while not cond():
-                assert time.monotonic() - t0 < max_s, f"timed out waiting for {what}"
+                assert time.monotonic() - t0 < max_s * SLOW_MACHINE, f"timed out waiting for {what}"
                 s.step()  # what the app's stepping thread does: step, flush, poll
                 time.sleep(0.002)
 
@@ -67,11 +67,6 @@ def test_a_vda5050_scenario_served_by_the_app_takes_orders_over_mqtt(tmp_path: P
         m.close()
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="seen failing when run after other test modules in one process (the OFFLINE "
-    "message does not reach the test's client before the embedded broker stops); passes alone",
-)
 def test_closing_the_app_publishes_offline(tmp_path: Path) -> None:
     pytest.importorskip("viser")
     from agvsim.app.server import open_session

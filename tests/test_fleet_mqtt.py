@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fleet_helpers import (
+    SLOW_MACHINE,
     Master,
     Mosquitto,
     action,
@@ -57,7 +58,7 @@ def pump(run: FleetRun, cond: Callable[[], object], max_s: float, what: str) -> 
     """Step the fleet (20 steps per wall second at most: the master has time to answer)."""
     t0 = time.monotonic()
     while not cond():
-        assert time.monotonic() - t0 < max_s, f"timed out waiting for {what}"
+        assert time.monotonic() - t0 < max_s * SLOW_MACHINE, f"timed out waiting for {what}"
         run.step()
         run.transport.poll(0.002)
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -197,8 +196,7 @@ class FleetSession(Session):
             if transport is not None:
                 transport.close()
             broker, self.broker = self.broker, None
-            if broker is not None:
-                time.sleep(1.0)  # let the broker hand the OFFLINE messages on
+            if broker is not None:  # the transport saw its OFFLINE messages passed on
                 broker.stop()
 
     def banner(self) -> list[str]:

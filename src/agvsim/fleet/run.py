@@ -84,6 +84,5 @@ class FleetRun:
 
     def close(self) -> None:
         self.transport.close()
-        if self.broker is not None:
-            time.sleep(0.2)  # let the broker hand the OFFLINE messages on
+        if self.broker is not None:  # the transport saw its OFFLINE messages passed on
             self.broker.stop()

@@ -125,8 +125,8 @@ class _Link:
     def _on_message(self, _c, _u, msg) -> None:
         self.t._route(msg.topic, msg.payload)
 
-    def publish(self, topic: str, message: dict, retain: bool) -> None:
-        self.client.publish(
+    def publish(self, topic: str, message: dict, retain: bool) -> mqtt.MQTTMessageInfo:
+        return self.client.publish(
             f"{self.prefix}/{topic}",
             json.dumps(message, separators=(",", ":")),
             qos=QOS.get(topic, 0),
@@ -154,7 +154,10 @@ class MqttTransport:
         self._by_prefix = {link.prefix: link.vehicle for link in self.links}
         groups = sorted({p.rsplit("/", 1)[0] for p in prefixes.values()})
         topics = [f"{g}/+/{t}" for g in groups for t in ("order", "instantActions")]
-        self.receiver = _Link(self, None, f"{interface_name}/agvsim-fleet-{id(self):x}", topics)
+        receiver = f"{interface_name}/agvsim-fleet-{id(self):x}"
+        self._echo_topic = f"{receiver}/closing"  # see close()
+        self._echoed = False
+        self.receiver = _Link(self, None, receiver, [*topics, self._echo_topic])
         self._all = [self.receiver, *self.links]
         self._last_misc = 0.0
         self._pending: set[_Link] = set()  # links with output queued since the last write
@@ -198,6 +201,9 @@ class MqttTransport:
                     pass
 
     def _route(self, topic: str, payload: bytes) -> None:
+        if topic == self._echo_topic:
+            self._echoed = True
+            return
         prefix, name = topic.rsplit("/", 1)
         vehicle = self._by_prefix.get(prefix)
         if vehicle is not None:
@@ -249,16 +255,28 @@ class MqttTransport:
                 v.drain()
         self._write_pending()
 
-    def close(self) -> None:
-        """Publish OFFLINE and disconnect cleanly (no last will)."""
-        for link in self.links:
-            if link.online and link.vehicle is not None:
-                link.publish("connection", link.vehicle.connection("OFFLINE"), True)
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Publish OFFLINE and disconnect cleanly (no last will). Returns once the broker has
+        passed the OFFLINE messages on (or after ``timeout_s``), so a broker stopped right
+        after (the embedded one) does not swallow them: each is acknowledged (QoS 1), then a
+        message the receiver sends itself comes back through the broker after them."""
+        t_end = time.monotonic() + timeout_s
+        sent = [
+            link.publish("connection", link.vehicle.connection("OFFLINE"), True)
+            for link in self.links
+            if link.online and link.vehicle is not None
+        ]
+        while time.monotonic() < t_end and not all(m.is_published() for m in sent):
+            self.poll(0.02)
+        if self.receiver.online:
+            self._echoed = False
+            self.receiver.client.publish(self._echo_topic, b"", qos=0)
+            while time.monotonic() < t_end and not self._echoed and self.receiver.online:
+                self.poll(0.02)
         for link in self._all:
             if link.online:
                 link.client.disconnect()
-        t0 = time.monotonic()
-        while time.monotonic() - t0 < 2.0 and any(
+        while time.monotonic() < t_end and any(
             x.client.want_write() for x in self._all if x.client.socket() is not None
         ):
             self.poll(0.05)
