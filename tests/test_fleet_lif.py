@@ -119,6 +119,27 @@ def test_graph_errors_beyond_the_schema() -> None:
     )
 
 
+@pytest.mark.parametrize("bad", [0.0, -1.0, math.nan, math.inf])
+def test_a_speed_limit_no_vehicle_can_drive_at_is_refused(bad: float) -> None:
+    # the schema only asks for a number; a master dividing an edge's length by it (found by
+    # the fleet fuzz test: maxSpeed 0 crashed the route tables) must never see one
+    doc = small_doc()
+    lay = doc["layouts"][0]
+    lay["edges"][0]["vehicleTypeEdgeProperties"][0]["maxSpeed"] = bad
+    lay["edges"][1]["vehicleTypeEdgeProperties"][0]["maxRotationSpeed"] = bad
+    with pytest.raises(LifError) as e:
+        parse_lif(doc)
+    probs = e.value.problems
+    assert any(
+        p.startswith("layouts[0].edges[0].vehicleTypeEdgeProperties[0].maxSpeed: ") for p in probs
+    )
+    assert any(
+        p.startswith("layouts[0].edges[1].vehicleTypeEdgeProperties[0].maxRotationSpeed: ")
+        for p in probs
+    )
+    assert len(probs) == 2
+
+
 def test_bad_json_gives_the_line(tmp_path: Path) -> None:
     p = tmp_path / "bad.json"
     p.write_text('{\n  "metaInformation": {,\n}')

@@ -13,6 +13,7 @@ is the same every time; ``-m slow`` runs the long variant with many more example
 from __future__ import annotations
 
 import copy
+import json
 import math
 import random
 import re
@@ -482,6 +483,91 @@ def test_broken_map_files(tmp_path, spec):
 @given(spec=map_files())
 def test_broken_map_files_long(tmp_path, spec):
     _map(tmp_path, *spec)
+
+
+# ------------------------------------------------------------- fleet blocks and LIF layouts
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _fleet_base() -> tuple[dict, dict]:
+    """The mixed-fleet warehouse cut to three vehicles, and its LIF layout (76 nodes)."""
+    data = yaml.safe_load((ROOT / "scenarios" / "warehouse_operations.yaml").read_text())
+    data["robots"] = data["robots"][:3]
+    data["vda5050"]["vehicles"] = data["vda5050"]["vehicles"][:3]
+    data["master"]["breakdowns"] = [{"vehicle": "agv02", "at_s": 2.0}]
+    data["duration_s"] = 5.0
+    lif = json.loads((ROOT / "scenarios" / "fleet_warehouse.lif.json").read_text())
+    return data, lif
+
+
+FLEET_BASE = _fleet_base()
+FLEET_KEYS = ("vda5050", "master", "layout", "robots", "dt_s", "seed")
+
+
+def _mutate(draw: st.DrawFn, data: Any, paths: list[tuple]) -> None:
+    path = draw(st.sampled_from(paths))
+    parent, key = _at(data, path[:-1]), path[-1]
+    action = draw(st.sampled_from(["perturb", "perturb", "replace", "replace", "delete"]))
+    if action == "perturb" and type(parent[key]) in (int, float):
+        value = parent[key] * draw(st.floats(0.0, 2.0))
+        parent[key] = round(value) if type(parent[key]) is int else value
+    elif action == "delete":
+        del parent[key]
+    else:
+        parent[key] = copy.deepcopy(draw(values))
+
+
+@st.composite
+def fleet_inputs(draw: st.DrawFn) -> tuple[dict, bytes]:
+    """(scenario, LIF file bytes): the layout, the scenario's fleet blocks or both mutated,
+    or the LIF file cut short."""
+    data, lif = copy.deepcopy(FLEET_BASE[0]), copy.deepcopy(FLEET_BASE[1])
+    what = draw(st.sampled_from(["layout", "layout", "blocks", "both", "truncate"]))
+    for _ in range(draw(st.integers(1, 3))):
+        if what in ("layout", "both"):
+            _mutate(draw, lif, _paths(lif))
+        if what in ("blocks", "both"):
+            _mutate(draw, data, [p for p in _paths(data) if p[0] in FLEET_KEYS])
+    blob = json.dumps(lif, default=str).encode()
+    if what == "truncate":
+        blob = blob[: draw(st.integers(0, len(blob) - 1))]
+    return data, blob
+
+
+def _fleet(tmp_path: Path, data: dict, blob: bytes, record: bool = True) -> None:
+    (tmp_path / "fleet_warehouse.lif.json").write_bytes(blob)
+    path = _write(tmp_path / "fleet.yaml", data)
+    got = _contract(path, tmp_path / "out", run=False)
+    if record:
+        event(got)
+    if got != "valid" or not isinstance(data.get("master"), dict):
+        return
+    from agvsim.master.run import InProcessRun
+    from agvsim.scenario import load_scenario
+
+    with _time_limit(HANG_S):  # a valid fleet runs: the master plans, vehicles drive
+        run = InProcessRun(load_scenario(path), duration_s=5.0)
+        run.run(until_s=5.0)
+    assert run.t_s == pytest.approx(5.0, abs=0.1)
+    assert run.summary()["collisions"] == 0
+
+
+def test_the_fleet_base_is_valid_and_its_master_runs(tmp_path):
+    _fleet(tmp_path, FLEET_BASE[0], json.dumps(FLEET_BASE[1]).encode(), record=False)
+    assert _contract(tmp_path / "fleet.yaml", tmp_path / "o", run=False) == "valid"
+
+
+@FAST
+@given(spec=fleet_inputs())
+def test_mutated_fleet_blocks_and_layouts(tmp_path, spec):
+    _fleet(tmp_path, *spec)
+
+
+@pytest.mark.slow
+@LONG
+@given(spec=fleet_inputs())
+def test_mutated_fleet_blocks_and_layouts_long(tmp_path, spec):
+    _fleet(tmp_path, *spec)
 
 
 # ---------------------------------------------------------------------------------- recordings

@@ -250,6 +250,12 @@ def parse_lif(doc: Any, source: str = "LIF") -> list[Layout]:
             pos = n["nodePosition"]
             if not (math.isfinite(pos["x"]) and math.isfinite(pos["y"])):
                 problems.append(f"{where}.nodes[{ni}].nodePosition: not finite numbers")
+            for pi, p in enumerate(n["vehicleTypeNodeProperties"]):
+                if p.get("theta") is not None and not math.isfinite(p["theta"]):
+                    problems.append(
+                        f"{where}.nodes[{ni}].vehicleTypeNodeProperties[{pi}].theta: "
+                        f"{p['theta']!r} is not a finite angle (rad)"
+                    )
             nodes[nid] = Node(
                 nid,
                 float(pos["x"]),
@@ -278,6 +284,19 @@ def parse_lif(doc: Any, source: str = "LIF") -> list[Layout]:
                 why = traj.problem() if traj is not None else None
                 if why:
                     problems.append(f"{at}.vehicleTypeEdgeProperties[{pi}].trajectory: {why}")
+                for key in ("maxSpeed", "maxRotationSpeed"):  # limits a vehicle can drive at
+                    v = p.get(key)
+                    if v is not None and not (math.isfinite(v) and v > 0):
+                        problems.append(
+                            f"{at}.vehicleTypeEdgeProperties[{pi}].{key}: {v!r} is no speed "
+                            "limit (a finite number > 0; leave it out for none)"
+                        )
+                v = p.get("vehicleOrientation")
+                if v is not None and not math.isfinite(v):
+                    problems.append(
+                        f"{at}.vehicleTypeEdgeProperties[{pi}].vehicleOrientation: {v!r} is not "
+                        "a finite angle (rad)"
+                    )
                 types[p["vehicleTypeId"]] = EdgeProps(
                     bool(p["rotationAllowed"]),
                     p.get("maxSpeed"),
@@ -297,6 +316,10 @@ def parse_lif(doc: Any, source: str = "LIF") -> list[Layout]:
                         f"of layout {lay['layoutId']!r}"
                     )
             sp = s.get("stationPosition")
+            if sp is not None and not all(
+                math.isfinite(sp.get(k, 0.0)) for k in ("x", "y", "theta")
+            ):
+                problems.append(f"{where}.stations[{si}].stationPosition: not finite numbers")
             stations[s["stationId"]] = Station(
                 s["stationId"],
                 tuple(s["interactionNodeIds"]),
