@@ -2,8 +2,9 @@
 faults a real robot's log may carry (:mod:`agvsim.slam.perturb`).
 
 Run ``python benchmarks/bench_slam_robustness.py [--logs aces intel mit-killian]
-[--faults none freeze ...] [--jobs N] [--seed S]``. Each (log, fault) case runs in its own
-process (one numba thread; ``--jobs`` cases at a time, 1 by default) and prints
+[--faults none freeze ...] [--jobs N] [--seed S] [--seeds K]``. Each (log, fault, seed) case
+runs in its own process (one numba thread; ``--jobs`` cases at a time, 1 by default) and
+prints
 
 * scans and keyframes processed, loop-closure edges, CPU and wall seconds and the real-time
   factor on CPU time (log duration / CPU seconds: a busy machine stretches wall time);
@@ -18,6 +19,10 @@ process (one numba thread; ``--jobs`` cases at a time, 1 by default) and prints
   (target < 1);
 * the process's peak resident memory (MiB) when SLAM is done, and after rendering and scoring
   the final map (which grows with the mapped area).
+
+A fault is one random draw (which scans a thinned log keeps, the range noise, where odometry
+freezes): ``--seeds K`` runs every faulty case with seeds ``S .. S+K-1`` and ends with the
+mean and the worst of each ratio over them (the unperturbed case runs once).
 
 MIT Killian Court has no usable relations (synthetic time stamps): it is scored by the map's
 own consistency, the share of keyframe returns that land within 0.1 m of an occupied cell of
@@ -247,6 +252,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument(
+        "--seeds", type=int, default=1, help="run each faulty case with this many seeds"
+    )
+    ap.add_argument(
         "--passes",
         type=int,
         default=1,
@@ -259,21 +267,30 @@ def main(argv: list[str] | None = None) -> int:
         print("robustness suite skipped: no data sets folder (set AGVSIM_DATASETS)")
         return 0
     logs = list(args.logs) + [str(p.resolve()) for p in args.mcap]
-    cases = [(log, f) for log in logs for f in args.faults]
+    if args.seeds < 1:
+        ap.error(f"--seeds must be at least 1, got {args.seeds}")
+    cases = [
+        (log, f, seed)
+        for log in logs
+        for f in args.faults
+        for seed in range(args.seed, args.seed + (1 if f == "none" else args.seeds))
+    ]
     print(
-        f"{'log':<16}{'fault':<13}{'scans':>6}{'kf':>6}{'loops':>6}{'SLAM m':>9}{'odom m':>9}"
+        f"{'log':<16}{'fault':<13}{'seed':>5}{'scans':>6}{'kf':>6}{'loops':>6}"
+        f"{'SLAM m':>9}{'odom m':>9}"
         f"{'/base':>7}{'/same':>7}{'/odom':>7}{'rel':>6}{'RTx':>7}{'CPU s':>8}{'wall s':>8}"
         f"{'MiB':>7}{'map MiB':>8}",
         flush=True,
     )
     base: dict[str, float] = {}
     base_per: dict[str, np.ndarray] = {}
+    ratios: dict[tuple[str, str], list[tuple[float, float, float]]] = {}
     with ProcessPoolExecutor(max_workers=args.jobs, max_tasks_per_child=1) as pool:
         futures = [
-            pool.submit(run_case, root, log, f, args.seed, args.passes, args.maps)
-            for log, f in cases
+            pool.submit(run_case, root, log, f, seed, args.passes, args.maps)
+            for log, f, seed in cases
         ]
-        for fut in futures:
+        for fut, (_, _, seed) in zip(futures, cases, strict=True):
             r = fut.result()
             log = str(r["log"])
             if log.endswith(".mcap"):
@@ -289,6 +306,7 @@ def main(argv: list[str] | None = None) -> int:
                     both = np.isfinite(per) & np.isfinite(base_per[log])
                     if both.any():
                         same = float(per[both].mean() / base_per[log][both].mean())
+                ratios.setdefault((log, str(r["fault"])), []).append((ratio, same, slam_m / odom_m))
                 score = (
                     f"{slam_m:>9.4f}{odom_m:>9.3f}{ratio:>7.2f}{same:>7.2f}"
                     f"{slam_m / odom_m:>7.3f}{int(r['relations']):>6d}"
@@ -299,12 +317,23 @@ def main(argv: list[str] | None = None) -> int:
                     f"{float(r['revisit']):.3f} (odometry {float(r['revisit_odom']):.3f})"
                 )
             print(
-                f"{log:<16}{str(r['fault']):<13}{int(r['scans']):>6d}{int(r['keyframes']):>6d}"
+                f"{log:<16}{str(r['fault']):<13}{seed:>5d}{int(r['scans']):>6d}{int(r['keyframes']):>6d}"
                 f"{int(r['loops']):>6d}{score}{float(r['rt']):>7.1f}{float(r['cpu_s']):>8.1f}"
                 f"{float(r['wall_s']):>8.1f}{float(r['slam_mib']):>7.0f}"
                 f"{float(r['peak_mib']):>8.0f}",
                 flush=True,
             )
+    if args.seeds > 1:
+        print(
+            f"\n{'log':<16}{'fault':<13}{'seeds':>6}  /base mean (worst)  /same mean (worst)  "
+            "/odom mean (worst)"
+        )
+        for (log, fault), vals in ratios.items():
+            if fault == "none":
+                continue
+            v = np.asarray(vals)
+            cols = "".join(f"{np.mean(v[:, k]):>11.2f} ({np.max(v[:, k]):.2f}) " for k in range(3))
+            print(f"{log:<16}{fault:<13}{len(v):>6d}{cols}", flush=True)
     return 0
 
 

@@ -79,6 +79,19 @@ def test_thin_keeps_the_rate() -> None:
     assert np.diff(t).min() >= 1 / 1.5 - 1e-12 and np.diff(t).max() <= 1 / 1.5 + 0.2 + 1e-12
 
 
+def test_thin_phase_follows_the_seed() -> None:
+    """The first kept scan lies within one period of the log's first scan, and which scans
+    are kept depends on the seed (the same seed: the same scans)."""
+    t0 = scans()[0].stamp_s
+    firsts = set()
+    for seed in range(6):
+        t = [r.stamp_s for r in run("thin", seed=seed, cfg=FaultConfig(thin_rate_hz=1.5))]
+        assert t0 <= t[0] < t0 + 1 / 1.5 + 0.2
+        assert t == [r.stamp_s for r in run("thin", seed=seed, cfg=FaultConfig(thin_rate_hz=1.5))]
+        firsts.add(t[0])
+    assert len(firsts) >= 3
+
+
 def test_drop_loses_about_the_fraction() -> None:
     kept = len(run("drop", cfg=FaultConfig(drop_fraction=0.25)))
     assert 0.75 * 400 - 40 < kept < 0.75 * 400 + 40

@@ -16,7 +16,7 @@ from agvsim.slam.g2o import load_g2o
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.loop_closure import LoopClosure
 from agvsim.slam.perturb import with_false_closures
-from agvsim.slam.posegraph import PoseGraph, chi2, optimize
+from agvsim.slam.posegraph import PoseGraph, chi2, edge_chi2, optimize
 from agvsim.slam.posegraph_init import odometry_chain_poses
 from agvsim.slam.robust import RobustKernel, robust_cost_and_weights, switch_values
 from agvsim.slam.se2 import between, compose, wrap_angle
@@ -93,6 +93,64 @@ def test_false_closure_is_switched_off_in_a_small_graph() -> None:
         optimize(g, switchable=switchable[:-1])
     with pytest.raises(ValueError, match="switch_scale"):
         optimize(g, switchable=switchable, switch_scale=0.0)
+
+
+def test_switch_scale_per_edge() -> None:
+    """One scale per edge: all equal is the single scale, bit for bit; priors so wide that
+    every closure stays whole are plain least squares; the false closure alone with a wide
+    prior stays whole and bends the square; the right closures alone with a wide prior (the
+    false one at 3) still switch it off."""
+    g, truth, switchable = square_loop(True)
+    one = optimize(g, max_iterations=200, switchable=switchable, switch_scale=3.0)
+    each = optimize(
+        g, max_iterations=200, switchable=switchable, switch_scale=np.full(g.n_edges, 3.0)
+    )
+    np.testing.assert_array_equal(each.poses, one.poses)
+    plain = optimize(g, max_iterations=200)
+    wide = optimize(
+        g, max_iterations=200, switchable=switchable, switch_scale=np.full(g.n_edges, 1e6)
+    )
+    np.testing.assert_allclose(wide.poses, plain.poses, atol=1e-6)
+    wide_false = np.full(g.n_edges, 3.0)
+    wide_false[-1] = 1e6
+    bent = optimize(g, max_iterations=200, switchable=switchable, switch_scale=wide_false)
+    assert bent.switches[-1] == 1.0
+    assert np.abs(bent.poses[:, :2] - truth[:, :2]).max() > 0.5
+    wide_right = np.full(g.n_edges, 1e6)
+    wide_right[-1] = 3.0
+    kept = optimize(g, max_iterations=200, switchable=switchable, switch_scale=wide_right)
+    assert_poses_close(kept.poses, truth, 1e-5)
+    assert kept.switches[-1] < 1e-3
+    with pytest.raises(ValueError, match="one per edge"):
+        optimize(g, switchable=switchable, switch_scale=np.full(g.n_edges - 1, 3.0))
+    bad = np.full(g.n_edges, 3.0)
+    bad[2] = -1.0
+    with pytest.raises(ValueError, match="positive and finite, got -1.0"):
+        optimize(g, switchable=switchable, switch_scale=bad)
+
+
+def test_online_stages_follow_the_new_closures_only() -> None:
+    """A closure switched off in an earlier optimisation keeps a huge chi2; it must not set
+    the graduated stages of the next one (nor have its prior relaxed again): with no new
+    closure there is one stage at ``switch_scale``; a new closure with chi2 900 gives stages
+    sqrt(900) = 30, sqrt(90), then 3 (900 / 10 / 10 = 9 is not above 3^2)."""
+    g, truth, switchable = square_loop(True)
+    g.poses = truth
+    slam = GraphSlam(30.0)
+    slam.graph = g
+    slam._loop_edge_ids = [11, 12, 13]
+    slam._loops_optimised = 3
+    mask = slam.switchable_edges()
+    np.testing.assert_array_equal(mask, switchable)
+    assert edge_chi2(g)[13] > 1e4  # the false closure, at the true poses
+    assert slam.switch_stages(mask) == [3.0]
+    # a new closure node 3 -> node 9, measured 1.5 m off along x (information 400: chi2 900)
+    z = between(truth[3], truth[9]) + np.array([1.5, 0.0, 0.0])
+    g.add_edge(3, 9, z, np.diag([400.0, 400.0, (180 / math.pi) ** 2]))
+    slam._loop_edge_ids.append(14)
+    mask = slam.switchable_edges()
+    assert edge_chi2(g)[14] == pytest.approx(900.0)
+    np.testing.assert_allclose(slam.switch_stages(mask), [30.0, math.sqrt(90.0), 3.0])
 
 
 def load_graph(name: str) -> PoseGraph:

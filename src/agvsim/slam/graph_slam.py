@@ -167,6 +167,7 @@ class GraphSlam:
         self._global_from_local = np.zeros(3)
         self._unoptimised: list[LoopClosure] = []
         self._loop_edge_ids: list[int] = []  # graph edge index of every loop closure
+        self._loops_optimised = 0  # closures in the graph at the last optimisation
         self.switches = np.zeros(0)  # switch of every loop closure at the last optimisation
         self._last_optimised_node = 0
         self._info_local = _information(cfg.sigma_local_m, cfg.sigma_local_rad)
@@ -453,20 +454,34 @@ class GraphSlam:
         return mask
 
     def switch_stages(self, mask: NDArray[np.bool_]) -> list[float]:
-        """Switch scales (std) to optimise with in turn: from one that keeps every closure
-        whole at the current poses down to ``switch_scale``, divided by
-        ``switch_stage_factor`` in chi2 per stage (graduated non-convexity,
-        :func:`~.posegraph_graduated.graduated_scales`)."""
-        worst = float(edge_chi2(self.graph)[mask].max()) if mask.any() else 0.0
+        """Switch scales (std) for the closures added since the last optimisation, in turn:
+        from one that keeps each of them whole at the current poses down to ``switch_scale``,
+        divided by ``switch_stage_factor`` in chi2 per stage (graduated non-convexity,
+        :func:`~.posegraph_graduated.graduated_scales`). Closures already optimised had their
+        switch decided at a consistent graph: their prior is not relaxed again (a switched-off
+        false closure would pull again in every optimisation, and its chi2 would set the
+        stages of all later ones)."""
+        new = self._new_closures(mask)
+        worst = float(edge_chi2(self.graph)[new].max()) if new.any() else 0.0
         return graduated_scales(worst, self.cfg.switch_scale, self.cfg.switch_stage_factor)
+
+    def _new_closures(self, mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """(E,) True for the switchable loop-closure edges added since the last optimisation."""
+        new = np.zeros_like(mask)
+        ids = np.asarray(self._loop_edge_ids[self._loops_optimised :], dtype=np.int64)
+        new[ids] = mask[ids]
+        return new
 
     def optimise(self, max_iterations: int = 20) -> None:
         """Sparse Levenberg-Marquardt over all keyframes and submaps (first keyframe fixed),
-        loop closures switchable (:meth:`switch_stages`)."""
+        loop closures switchable, the new ones with a graduated prior (:meth:`switch_stages`)."""
         mask = self.switchable_edges()
+        new = self._new_closures(mask)
         stages = self.switch_stages(mask)
         for k, scale in enumerate(stages):
             final = k == len(stages) - 1
+            scales = np.full(self.graph.n_edges, self.cfg.switch_scale)
+            scales[new] = scale
             result = optimize(
                 self.graph,
                 robust="huber",
@@ -474,7 +489,7 @@ class GraphSlam:
                 max_iterations=max_iterations if final else min(max_iterations, 10),
                 tolerance=1e-6 if final else 1e-4,
                 switchable=mask,
-                switch_scale=scale,
+                switch_scale=scales,
             )
             self.graph.poses = result.poses
         self.switches = result.switches[mask]
@@ -482,6 +497,7 @@ class GraphSlam:
         g_last = self.graph.poses[self.node_var[last]]
         self._global_from_local = compose(g_last, inverse(self.keyframes[last].local))
         self._unoptimised = []
+        self._loops_optimised = len(self._loop_edge_ids)
         self._last_optimised_node = len(self.keyframes)
         self.loops.clear_pending()
         self.n_optimisations += 1

@@ -5,7 +5,9 @@ Each :class:`Fault` turns a stream of :class:`~agvsim.scan.LaserScan` into anoth
 
 * ``freeze``: odometry stops changing for 2 to 10 scans (a stalled encoder message), then
   jumps by everything it missed; one freeze starts on average every ``freeze_every_scans``;
-* ``thin``: only scans at least ``1 / thin_rate_hz`` after the last kept one remain;
+* ``thin``: only scans at least ``1 / thin_rate_hz`` after the last kept one remain, the
+  first kept one drawn uniformly within the first period (the phase: which scans a thinned
+  log keeps is chance, so repeated seeds show the spread);
 * ``scale``: odometry's translation increments are ``odometry_scale`` times too long;
 * ``heading-bias``: odometry's heading drifts by ``heading_bias_rad_per_s`` (a gyro bias);
 * ``drop``: each scan is lost with probability ``drop_fraction``;
@@ -85,9 +87,13 @@ def apply_fault(
     if kind is Fault.NONE:
         yield from scans
     elif kind is Fault.THIN:
+        period = 1.0 / c.thin_rate_hz
+        phase = float(rng.uniform(0.0, period))
         last = -math.inf
         for rec in scans:
-            if rec.stamp_s - last >= 1.0 / c.thin_rate_hz:
+            if last == -math.inf:  # the first kept scan: at or after the phase
+                last = rec.stamp_s + phase - period
+            if rec.stamp_s - last >= period:
                 last = rec.stamp_s
                 yield rec
     elif kind is Fault.DROP:

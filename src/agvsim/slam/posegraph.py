@@ -425,7 +425,7 @@ def optimize(
     verbose: Callable[[IterationInfo], None] | None = None,
     initialisation: Initialisation | str = Initialisation.GIVEN,
     switchable: ArrayLike | None = None,
-    switch_scale: float = 1.0,
+    switch_scale: float | ArrayLike = 1.0,
 ) -> OptimizeResult:
     """Minimise ``sum_k rho(e_k^T Omega_k e_k)`` over the free poses by Levenberg-Marquardt.
 
@@ -442,12 +442,21 @@ def optimize(
     ``switchable`` (E,) bools marks edges that may be wrong, loop closures typically: they get
     switchable constraints (:attr:`RobustKernel.DCS` with ``Phi = switch_scale^2``) instead
     of ``robust``, and the result reports their switches (a false closure's goes to 0).
+    ``switch_scale`` is one scale for all of them or one per edge (E,) (only the switchable
+    edges' entries are used): online SLAM relaxes the prior of new closures only.
     """
     kernel = RobustKernel(robust)
     if robust_scale <= 0.0:
         raise ValueError(f"robust_scale must be positive, got {robust_scale}")
-    if switch_scale <= 0.0:
-        raise ValueError(f"switch_scale must be positive, got {switch_scale}")
+    scales = np.asarray(switch_scale, dtype=np.float64)
+    if scales.ndim != 0 and scales.shape != (graph.n_edges,):
+        raise ValueError(
+            f"switch_scale must be one number or one per edge, shape ({graph.n_edges},); "
+            f"got {scales.shape}"
+        )
+    if not np.all(scales > 0.0) or not np.all(np.isfinite(scales)):
+        bad = scales if scales.ndim == 0 else scales[~((scales > 0.0) & np.isfinite(scales))][0]
+        raise ValueError(f"switch_scale must be positive and finite, got {bad}")
     switch = np.zeros(graph.n_edges, dtype=bool)
     if switchable is not None:
         switch = np.asarray(switchable, dtype=bool)
@@ -457,6 +466,7 @@ def optimize(
                 f"got {switch.shape}"
             )
     any_switch = bool(switch.any())
+    sw_scale = np.broadcast_to(scales, (graph.n_edges,))[switch]
     t0 = time.perf_counter()
     chi2_given = chi2(graph) if graph.n_edges else 0.0
     poses = initial_guess(graph, initialisation, fixed)
@@ -469,7 +479,7 @@ def optimize(
         s = np.einsum("ka,kab,kb->k", e, om, e)
         cost, w = robust_cost_and_weights(s, kernel, robust_scale)
         if any_switch:
-            c_sw, w_sw = robust_cost_and_weights(s[switch], RobustKernel.DCS, switch_scale)
+            c_sw, w_sw = robust_cost_and_weights(s[switch], RobustKernel.DCS, sw_scale)
             cost, w = cost.copy(), w.copy()
             cost[switch], w[switch] = c_sw, w_sw
         return float(cost.sum()), float(s.sum()), w, e, a, b
@@ -478,7 +488,7 @@ def optimize(
         out = np.ones(graph.n_edges)
         if any_switch:
             s = np.einsum("ka,kab,kb->k", e[switch], om[switch], e[switch])
-            out[switch] = switch_values(s, switch_scale)
+            out[switch] = switch_values(s, sw_scale)
         return out
 
     cost, c2, w, e, a, b = evaluate(poses, True)

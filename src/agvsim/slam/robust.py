@@ -43,8 +43,9 @@ class RobustKernel(enum.StrEnum):
     DCS = "dcs"
 
 
-def robust_cost_and_weights(s: F64, kernel: RobustKernel, scale: float) -> tuple[F64, F64]:
-    """``(rho(s), rho'(s))`` per edge for the kernel (see :class:`RobustKernel`)."""
+def robust_cost_and_weights(s: F64, kernel: RobustKernel, scale: float | F64) -> tuple[F64, F64]:
+    """``(rho(s), rho'(s))`` per edge for the kernel (see :class:`RobustKernel`); ``scale``
+    one number or one per edge."""
     if kernel is RobustKernel.NONE:
         return s, np.ones_like(s)
     k2 = scale * scale
@@ -63,7 +64,7 @@ def robust_cost_and_weights(s: F64, kernel: RobustKernel, scale: float) -> tuple
     raise ValueError(f"unknown robust kernel {kernel!r}")
 
 
-def switch_values(s: F64, scale: float) -> F64:
+def switch_values(s: F64, scale: float | F64) -> F64:
     """The switches ``min(1, 2 Phi / (Phi + s))`` (``Phi = scale^2``) of switchable edges with
     ``s = e^T Omega e``: 1 keeps an edge whole, 0 switches it off (:class:`RobustKernel`)."""
     k2 = scale * scale
