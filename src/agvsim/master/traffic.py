@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agvsim.master.graph import Arc, RoadGraph
-from agvsim.master.sipp import search
+from agvsim.master.sipp import Workspace, search
 
 INF = math.inf
 
@@ -72,6 +72,7 @@ class Reservations:
     _vn: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64), repr=False)
     _codes: dict[str, int] = field(default_factory=dict, repr=False)
     _own: dict[str, Counter[str]] = field(default_factory=dict, repr=False)  # serial: nodes
+    workspace: Workspace = field(default_factory=lambda: Workspace(0), repr=False)
 
     def add(self, v: Visit) -> None:
         q = self.visits.setdefault(v.node, [])
@@ -162,6 +163,7 @@ class Reservations:
             self._vb = np.empty((len(ids), 8))
             self._vs = np.empty((len(ids), 8), np.int64)
             self._vn = np.zeros(len(ids), np.int64)
+            self.workspace = Workspace(len(ids))
             for q in self.visits.values():
                 for pos, v in enumerate(q):
                     self._insert(index[v.node], pos, v)
@@ -259,7 +261,8 @@ def plan_route(
     else:
         start_exits = net.no_arcs
     held_from, held_until, vehicle, count = table.rows(ids, index)
-    nodes, arrive, depart, done, expansions = search(
+    space = table.workspace
+    args = (
         net.out_off,
         net.out_end,
         net.out_time_s,
@@ -285,7 +288,24 @@ def plan_route(
         float(weight),
         max_expansions,
     )
-    if expansions < 0:
+    while True:
+        nodes, arrive, depart, done, expansions = search(
+            *args,
+            space.gap_at,
+            space.gaps,
+            space.slots,
+            space.s_int,
+            space.s_time,
+            space.h_int,
+            space.h_time,
+            space.heap,
+            space.c_int,
+            space.c_time,
+        )
+        if expansions != -2:
+            break
+        space.grow()  # and search again, with room enough
+    if expansions == -1:
         raise NoRoute(f"{start} is not free for {serial} at t={t0_s:.1f} s")
     if nodes.size == 0:
         raise NoRoute(
