@@ -31,7 +31,16 @@ from agvsim.master.dispatch import POLICIES
 from agvsim.master.graph import RoadGraph
 from agvsim.master.metrics import Metrics
 from agvsim.master.orders import Transport
-from agvsim.master.traffic import INF, NoRoute, Reservations, Step, Stop, Visit, plan_route
+from agvsim.master.traffic import (
+    INF,
+    NoRoute,
+    Reservations,
+    StartTaken,
+    Step,
+    Stop,
+    Visit,
+    plan_route,
+)
 from agvsim.world.lif import Layout
 
 Message = tuple[str, str, dict]  # serial, topic, message
@@ -168,15 +177,19 @@ class Master:
         start = agv.route[-1] if fresh else agv.route[g]
         old = [v for v in (agv.visits[-1:] if fresh else agv.visits[g:]) if v is not None]
         held = old[0].start_s if old else t_s
-        for v in old:
-            self.table.remove(v)
         t0 = max(t_s, start.arrive_s)
+        # its decision point was taken by others when last tried, no visit of that node has
+        # changed since, and it must hold it as long or longer: taken still
+        blocked = (start.node, held, self.table.version(start.node))
+        if agv.blocked_at is not None and agv.blocked_at[:3] == blocked:
+            if t0 >= agv.blocked_at[3]:
+                return False
         graph = self.graph(agv)
         # how the vehicle reaches its decision point: by the route's arc into it, or it
         # stands there facing its reported heading (what a car-like can turn to depends on it)
         arrived_by = graph.arc(agv.route[g - 1].node, start.node) if g > 0 else None
         w0 = time.perf_counter()
-        try:
+        try:  # (the search leaves the vehicle's own visits out: its old ones stay till it fits)
             steps = plan_route(
                 graph,
                 self.table,
@@ -191,12 +204,15 @@ class Master:
                 heading_rad=agv.heading_rad,
                 weight=self.cfg.plan_weight,
             )
+        except StartTaken:
+            agv.blocked_at = (*blocked, t0)
+            return False
         except NoRoute:
-            for v in old:
-                self.table.add(v)
             return False
         finally:
             self.plan_times_s.append(time.perf_counter() - w0)
+        for v in old:
+            self.table.remove(v)
         keep = [] if fresh else agv.route[:g]
         visits: list[Visit | None] = [] if fresh else agv.visits[:g]
         for k, s in enumerate(steps):

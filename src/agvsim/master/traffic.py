@@ -72,14 +72,19 @@ class Reservations:
     _vn: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64), repr=False)
     _codes: dict[str, int] = field(default_factory=dict, repr=False)
     _own: dict[str, Counter[str]] = field(default_factory=dict, repr=False)  # serial: nodes
+    _version: Counter[str] = field(default_factory=Counter, repr=False)  # changes by node
     workspace: Workspace = field(default_factory=lambda: Workspace(0), repr=False)
 
     def add(self, v: Visit) -> None:
         q = self.visits.setdefault(v.node, [])
         pos = bisect_right(q, v.key(), key=Visit.key)
         q.insert(pos, v)
-        self._own.setdefault(v.serial, Counter())[v.node] += 1
+        own = self._own.get(v.serial)
+        if own is None:
+            own = self._own[v.serial] = Counter()
+        own[v.node] += 1
         self._gaps.pop(v.node, None)
+        self._version[v.node] += 1
         if self._index is not None:
             self._insert(self._index[v.node], pos, v)
 
@@ -89,6 +94,7 @@ class Reservations:
             if x is v:
                 del q[k]
                 self._gaps.pop(v.node, None)
+                self._version[v.node] += 1
                 own = self._own[v.serial]
                 own[v.node] -= 1
                 if not own[v.node]:
@@ -111,6 +117,10 @@ class Reservations:
         """``v``'s vehicle never leaves (a breakdown)."""
         v.end_s = INF
         self._update(v)
+
+    def version(self, node: str) -> int:
+        """How many times the visits of ``node`` have changed (added, removed, granted...)."""
+        return self._version[node]
 
     def first(self, node: str) -> Visit | None:
         q = self.visits.get(node)
@@ -184,6 +194,7 @@ class Reservations:
     def _update(self, v: Visit) -> None:
         """``v`` changed in place (granted, held forever): its row follows."""
         self._gaps.pop(v.node, None)
+        self._version[v.node] += 1
         if self._index is None:
             return
         q = self.visits.get(v.node, [])
@@ -211,6 +222,10 @@ class Step:
 
 class NoRoute(Exception):
     pass
+
+
+class StartTaken(NoRoute):
+    """The vehicle cannot stay on its start as long as it must: others' visits come first."""
 
 
 def plan_route(
@@ -306,7 +321,7 @@ def plan_route(
             break
         space.grow()  # and search again, with room enough
     if expansions == -1:
-        raise NoRoute(f"{start} is not free for {serial} at t={t0_s:.1f} s")
+        raise StartTaken(f"{start} is not free for {serial} at t={t0_s:.1f} s")
     if nodes.size == 0:
         raise NoRoute(
             f"no conflict-free route for {serial} from {start} through "
