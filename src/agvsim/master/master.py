@@ -508,33 +508,38 @@ class Master:
                 keep = rows != pos
                 groups[g] = (rows[keep] - (rows[keep] > pos), nodes[keep])
 
+        # each order to the best candidate whose route fits; a candidate whose route does
+        # not fit is out for the rest of the tick (the next best is tried), and at most
+        # ``dispatch_plans`` routes are searched a tick: the rest wait, in order, for the next
         left: list[Transport] = []
+        budget = self.cfg.dispatch_plans
         for tr in self.pending:
-            if not free:
-                left.append(tr)
-                continue
-            serial = self.policy(tr, free, costs)
-            agv = self.agvs.get(serial) if serial else None
-            if agv is None:
-                left.append(tr)
-                continue
-            n = tr.attempts
-            stops = [
-                (
-                    Stop(tr.source, PLANNED_DWELL_S),
-                    [action(f"{tr.transport_id}-pick-{n}", "pick", loadId=tr.transport_id)],
-                ),
-                (
-                    Stop(tr.destination, PLANNED_DWELL_S),
-                    [action(f"{tr.transport_id}-drop-{n}", "drop")],
-                ),
-                (Stop(agv.home or ""), []),
-            ]
-            if self.assign(agv, stops, t_s):
-                tr.vehicle, tr.assigned_s = agv.serial, t_s
-                agv.transport, agv.job = tr, "transport"
+            placed = False
+            while free and budget > 0 and not placed:
+                serial = self.policy(tr, free, costs)
+                agv = self.agvs.get(serial) if serial else None
+                if agv is None:
+                    break
+                n = tr.attempts
+                stops = [
+                    (
+                        Stop(tr.source, PLANNED_DWELL_S),
+                        [action(f"{tr.transport_id}-pick-{n}", "pick", loadId=tr.transport_id)],
+                    ),
+                    (
+                        Stop(tr.destination, PLANNED_DWELL_S),
+                        [action(f"{tr.transport_id}-drop-{n}", "drop")],
+                    ),
+                    (Stop(agv.home or ""), []),
+                ]
+                planned = len(self.plan_times_s)
+                if self.assign(agv, stops, t_s):
+                    tr.vehicle, tr.assigned_s = agv.serial, t_s
+                    agv.transport, agv.job = tr, "transport"
+                    placed = True
+                budget -= len(self.plan_times_s) - planned  # (a known-blocked one is free)
                 take(free.index(agv.serial))
-            else:
+            if not placed:
                 left.append(tr)
         self.pending = left
 
