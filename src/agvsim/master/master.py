@@ -254,6 +254,35 @@ class Master:
 
     # ------------------------------------------------------------------ per vehicle
     def _progress(self, agv: Agv, t_s: float, out: list[Message]) -> None:
+        """What the vehicle's last state tells: passed nodes (their visits released),
+        finished actions, a drop, an order done, a breakdown. Idempotent: when neither the
+        state nor the master's record of the vehicle changed since the last call, it is
+        skipped (about half the vehicles a tick at 1,000 vehicles)."""
+        seen = (agv.state, self._progress_key(agv))
+        if agv.progress_seen is not None and agv.progress_seen[0] is seen[0]:
+            if agv.progress_seen[1] == seen[1]:
+                return
+        self._progress_once(agv, t_s, out)
+        agv.progress_seen = (agv.state, self._progress_key(agv))
+
+    @staticmethod
+    def _progress_key(agv: Agv) -> tuple:
+        tr = agv.transport
+        return (
+            agv.order_id,
+            agv.update_id,
+            len(agv.route),
+            agv.granted,
+            agv.reached,
+            agv.sent,
+            agv.order_done,
+            agv.broken,
+            agv.job,
+            id(tr),
+            None if tr is None else tr.picked_s,
+        )
+
+    def _progress_once(self, agv: Agv, t_s: float, out: list[Message]) -> None:
         st = agv.state
         if st is None:
             return
