@@ -12,8 +12,8 @@ whole tick (dispatch, grants, metrics: mean and 95th percentile, one tick every 
 orders done and, for each simulated minute, the real-time factor, the routes planned and their
 mean time, the orders placed and delivered so far, the orders waiting for a vehicle and the
 visits in the reservation table (is the master at a steady state?). ``--weight 1`` plans
-every route the quickest that fits (the default is the
-scenario default, ``master.plan_weight``). ``--replay N`` also keeps every third planning
+every route the quickest that fits (the default is the scenario default,
+``master.plan_weight``). ``--replay N`` also keeps every third planning
 problem of the run (up to N: the reservation table copied as it was) and solves each again
 five times after the run, printing the fastest of the five: the route search alone, far less
 sensitive to other load on the machine than the times taken during the run (the copies slow
