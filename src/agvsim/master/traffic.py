@@ -73,7 +73,7 @@ class Reservations:
     _codes: dict[str, int] = field(default_factory=dict, repr=False)
     _own: dict[str, Counter[str]] = field(default_factory=dict, repr=False)  # serial: nodes
     _version: Counter[str] = field(default_factory=Counter, repr=False)  # changes by node
-    workspace: Workspace = field(default_factory=lambda: Workspace(0), repr=False)
+    workspace: Workspace | None = field(default=None, repr=False)  # the search's (rows())
 
     def add(self, v: Visit) -> None:
         q = self.visits.setdefault(v.node, [])
@@ -277,6 +277,7 @@ def plan_route(
         start_exits = net.no_arcs
     held_from, held_until, vehicle, count = table.rows(ids, index)
     space = table.workspace
+    assert space is not None  # made by rows()
     args = (
         net.out_off,
         net.out_end,
