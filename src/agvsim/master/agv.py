@@ -50,6 +50,10 @@ class Agv:
     stalled: bool = False
     replan: bool = False  # its route crosses a broken vehicle: re-plan as soon as one fits
     retimed_s: float = -1e9  # when it was last re-planned for being late
+    # (the state, Master._progress_key) when the master last read its progress
+    progress_seen: tuple[dict | None, tuple] | None = None
+    # (decision node, held since, the node's table version, from when) when others had it
+    blocked_at: tuple[str, float, int, float] | None = None
     turn_radius_m: float = 0.0  # car-like: its minimum turning radius (0: turns on the spot)
     road: RoadGraph | None = None  # its routing graph (Master.graph), once known
     _battery_of: dict | None = field(default=None, repr=False, compare=False)

@@ -73,6 +73,12 @@ class MasterConfig(StrictConfig):
         description="weighted A* in the route search: routes at most this much slower than "
         "the quickest that fits, found far sooner (1: always the quickest)",
     )
+    dispatch_plans: int = Field(
+        default=50,
+        ge=1,
+        le=1_000_000,
+        description="routes searched a tick to dispatch waiting orders (the rest: next tick)",
+    )
     horizon_nodes: int | None = Field(
         default=10,
         ge=0,

@@ -70,6 +70,22 @@ class Arc:
     heading_end_rad: float = 0.0  # ... and arriving at ``end``
 
 
+@dataclass(frozen=True)
+class ArcArrays:
+    """A ``RoadGraph`` as index arrays for the route search (``agvsim.master.sipp``): the
+    arcs out of each node in ``out_k`` order (CSR: ``out_off``, ``out_end``, ``out_time_s``),
+    and for a car-like vehicle the arcs it may take after each arc (``exit_off``,
+    ``exit_arc``: positions in the same order). ``arc_pos``: an arc's position."""
+
+    out_off: np.ndarray
+    out_end: np.ndarray
+    out_time_s: np.ndarray
+    exit_off: np.ndarray
+    exit_arc: np.ndarray
+    arc_pos: dict[Arc, int]
+    no_arcs: np.ndarray
+
+
 def turn_fits(turn_radius_m: float, heading_in_rad: float, arc_out: Arc, room_in_m: float) -> bool:
     """Can a vehicle of minimum turning radius ``turn_radius_m`` arriving at ``arc_out.start``
     heading ``heading_in_rad`` drive on along ``arc_out``? ``room_in_m``: the length of the edge
@@ -103,6 +119,8 @@ class RoadGraph:
         turn_radius_m: float = 0.0,
     ):
         self._times: OrderedDict[str, Times] = OrderedDict()
+        self._arrays: ArcArrays | None = None
+        self._avoid: tuple[frozenset[str], np.ndarray] | None = None
         if max_speed_m_s <= 0:
             raise ValueError(f"max_speed_m_s {max_speed_m_s}: must be > 0")
         if not turn_radius_m >= 0:
@@ -158,6 +176,38 @@ class RoadGraph:
                         for b in self.out[a.end]
                         if turn_fits(turn_radius_m, a.heading_end_rad, b, a.length_m)
                     ]
+
+    def arrays(self) -> ArcArrays:
+        """The graph as index arrays (built on first use, then kept)."""
+        if self._arrays is None:
+            arcs = [a for out in self.out_k for a, _ in out]
+            pos = {a: k for k, a in enumerate(arcs)}
+            off = np.cumsum([0] + [len(out) for out in self.out_k], dtype=np.int64)
+            exits = [[pos[b] for b, _ in self._exits.get(a, ())] for a in arcs]
+            self._arrays = ArcArrays(
+                out_off=off,
+                out_end=np.array([self.index[a.end] for a in arcs], np.int64),
+                out_time_s=np.array([a.time_s for a in arcs], np.float64),
+                exit_off=np.cumsum([0] + [len(x) for x in exits], dtype=np.int64),
+                exit_arc=np.array([b for x in exits for b in x], np.int64),
+                arc_pos=pos,
+                no_arcs=np.empty(0, np.int64),
+            )
+        return self._arrays
+
+    def avoid_mask(self, avoid: frozenset[str], stops: Iterable[str] = ()) -> np.ndarray:
+        """``avoid`` (node ids) as a mask by node index, less the nodes in ``stops``. The
+        last mask is kept: the master passes the same set of parking places every time."""
+        if self._avoid is None or self._avoid[0] is not avoid:
+            mask = np.zeros(len(self.ids), np.bool_)
+            mask[[self.index[n] for n in avoid if n in self.index]] = True
+            self._avoid = (avoid, mask)
+        mask = self._avoid[1]
+        clear = [self.index[n] for n in stops if n in avoid and n in self.index]
+        if clear:
+            mask = mask.copy()
+            mask[clear] = False
+        return mask
 
     @property
     def car_like(self) -> bool:

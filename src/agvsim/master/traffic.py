@@ -24,12 +24,15 @@ a new route can only be placed after it, never before.
 from __future__ import annotations
 
 import math
-from bisect import insort
+from bisect import bisect_right
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from heapq import heappop, heappush
+
+import numpy as np
 
 from agvsim.master.graph import Arc, RoadGraph
+from agvsim.master.sipp import Workspace, search
 
 INF = math.inf
 
@@ -52,17 +55,38 @@ FREE: list[tuple[float, float]] = [(-INF, INF)]  # the gaps of a node nobody vis
 
 @dataclass
 class Reservations:
-    """Pending visits per node, in planned order. The gaps between them are kept per node
-    until the node's visits change: change a visit only through ``grant`` and
-    ``hold_forever``."""
+    """Pending visits per node, in planned order (``visits``), mirrored for the numba route
+    search as one row of arrays per node (``rows``). Change a visit only through ``add``,
+    ``remove``, ``grant`` and ``hold_forever``: each keeps both up to date in O(row)."""
 
     margin_s: float = 0.5
     visits: dict[str, list[Visit]] = field(default_factory=dict)
     _gaps: dict[str, list[tuple[float, float]]] = field(default_factory=dict, repr=False)
+    # the mirror (made on the first ``rows`` call): by node index, each row the node's
+    # visits in order: held from ``_va`` (-inf once granted) to ``_vb``, margins included,
+    # by vehicle ``_vs`` (``_codes``); ``_vn`` visits a row
+    _index: dict[str, int] | None = field(default=None, repr=False)
+    _va: np.ndarray = field(default_factory=lambda: np.empty((0, 0)), repr=False)
+    _vb: np.ndarray = field(default_factory=lambda: np.empty((0, 0)), repr=False)
+    _vs: np.ndarray = field(default_factory=lambda: np.empty((0, 0), np.int64), repr=False)
+    _vn: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64), repr=False)
+    _codes: dict[str, int] = field(default_factory=dict, repr=False)
+    _own: dict[str, Counter[str]] = field(default_factory=dict, repr=False)  # serial: nodes
+    _version: Counter[str] = field(default_factory=Counter, repr=False)  # changes by node
+    workspace: Workspace | None = field(default=None, repr=False)  # the search's (rows())
 
     def add(self, v: Visit) -> None:
-        insort(self.visits.setdefault(v.node, []), v, key=Visit.key)
+        q = self.visits.setdefault(v.node, [])
+        pos = bisect_right(q, v.key(), key=Visit.key)
+        q.insert(pos, v)
+        own = self._own.get(v.serial)
+        if own is None:
+            own = self._own[v.serial] = Counter()
+        own[v.node] += 1
         self._gaps.pop(v.node, None)
+        self._version[v.node] += 1
+        if self._index is not None:
+            self._insert(self._index[v.node], pos, v)
 
     def remove(self, v: Visit) -> None:
         q = self.visits.get(v.node, [])
@@ -70,47 +94,57 @@ class Reservations:
             if x is v:
                 del q[k]
                 self._gaps.pop(v.node, None)
+                self._version[v.node] += 1
+                own = self._own[v.serial]
+                own[v.node] -= 1
+                if not own[v.node]:
+                    del own[v.node]
                 if not q:
                     del self.visits[v.node]
+                if self._index is not None:
+                    r, c = self._index[v.node], int(self._vn[self._index[v.node]])
+                    for a in (self._va, self._vb, self._vs):
+                        a[r, k : c - 1] = a[r, k + 1 : c]
+                    self._vn[r] = c - 1
                 return
 
     def grant(self, v: Visit) -> None:
         """``v`` is released to its vehicle: it holds its node from now on."""
         v.granted = True
-        self._gaps.pop(v.node, None)
+        self._update(v)
 
     def hold_forever(self, v: Visit) -> None:
         """``v``'s vehicle never leaves (a breakdown)."""
         v.end_s = INF
-        self._gaps.pop(v.node, None)
+        self._update(v)
+
+    def version(self, node: str) -> int:
+        """How many times the visits of ``node`` have changed (added, removed, granted...)."""
+        return self._version[node]
 
     def first(self, node: str) -> Visit | None:
         q = self.visits.get(node)
         return q[0] if q else None
 
     def safe_intervals(self, node: str, serial: str) -> list[tuple[float, float]]:
-        """The gaps between other vehicles' visits of ``node`` (with the margin). Do not
-        modify the list returned."""
+        """The gaps between other vehicles' visits of ``node`` (with the margin), as a list
+        (the route search works them out from ``rows`` itself). Do not modify the list."""
         q = self.visits.get(node)
         if not q:
             return FREE
-        for v in q:
-            if v.serial == serial:
-                return self._between(q, serial)
+        if node in self._own.get(serial, ()):
+            return self._between(q, serial)
         got = self._gaps.get(node)
         if got is None:
             got = self._gaps[node] = self._between(q, "")
         return got
 
     def _between(self, q: list[Visit], serial: str) -> list[tuple[float, float]]:
-        out, lo, m = [], -INF, self.margin_s
+        out, lo = [], -INF
         for v in q:
             if v.serial == serial:
                 continue
-            # a granted visit holds its node from now on, whatever its planned start: a
-            # vehicle ahead of its plan may be there already
-            a = -INF if v.granted else v.start_s - m
-            b = v.end_s + m
+            a, b = self._held(v)
             if a > lo:
                 out.append((lo, a))
             if b > lo:
@@ -118,6 +152,56 @@ class Reservations:
         if lo < INF:
             out.append((lo, INF))
         return out
+
+    def _held(self, v: Visit) -> tuple[float, float]:
+        """When ``v`` holds its node, margins included: a granted visit holds it from now
+        on, whatever its planned start (a vehicle ahead of its plan may be there already)."""
+        return (-INF if v.granted else v.start_s - self.margin_s), v.end_s + self.margin_s
+
+    def code(self, serial: str) -> int:
+        """``serial``'s number in the rows' vehicle column."""
+        return self._codes.setdefault(serial, len(self._codes))
+
+    def rows(
+        self, ids: list[str], index: dict[str, int]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The table as rows by node index (``index``: node id -> row, for the nodes
+        ``ids``): ``(held_from_s, held_until_s, vehicle, count)`` (see the class)."""
+        if self._index is not index and self._index != index:
+            self._index = index
+            self._va = np.empty((len(ids), 8))
+            self._vb = np.empty((len(ids), 8))
+            self._vs = np.empty((len(ids), 8), np.int64)
+            self._vn = np.zeros(len(ids), np.int64)
+            self.workspace = Workspace(len(ids))
+            for q in self.visits.values():
+                for pos, v in enumerate(q):
+                    self._insert(index[v.node], pos, v)
+        return self._va, self._vb, self._vs, self._vn
+
+    def _insert(self, r: int, pos: int, v: Visit) -> None:
+        c = int(self._vn[r])
+        if c == self._va.shape[1]:  # a full row: every row twice as long
+            pad = ((0, 0), (0, c))
+            self._va, self._vb = np.pad(self._va, pad), np.pad(self._vb, pad)
+            self._vs = np.pad(self._vs, pad)
+        for a in (self._va, self._vb, self._vs):
+            a[r, pos + 1 : c + 1] = a[r, pos:c]
+        self._va[r, pos], self._vb[r, pos] = self._held(v)
+        self._vs[r, pos] = self.code(v.serial)
+        self._vn[r] = c + 1
+
+    def _update(self, v: Visit) -> None:
+        """``v`` changed in place (granted, held forever): its row follows."""
+        self._gaps.pop(v.node, None)
+        self._version[v.node] += 1
+        if self._index is None:
+            return
+        q = self.visits.get(v.node, [])
+        pos = next((k for k, x in enumerate(q) if x is v), None)
+        if pos is not None:
+            r = self._index[v.node]
+            self._va[r, pos], self._vb[r, pos] = self._held(v)
 
 
 @dataclass(frozen=True)
@@ -138,6 +222,10 @@ class Step:
 
 class NoRoute(Exception):
     pass
+
+
+class StartTaken(NoRoute):
+    """The vehicle cannot stay on its start as long as it must: others' visits come first."""
 
 
 def plan_route(
@@ -165,7 +253,8 @@ def plan_route(
     it can drive off again; ``arrived_by`` is how it reaches ``start`` (None: it stands there,
     facing ``heading_rad``). ``weight`` > 1: weighted A* (f = g + weight h), a route at most
     ``weight`` times slower than the quickest that fits, found after far fewer states (the
-    quickest one costs a search over every state that could beat it). Raises NoRoute."""
+    quickest one costs a search over every state that could beat it). The search itself is
+    ``agvsim.master.sipp.search`` (numba). Raises NoRoute."""
     if not stops:
         raise ValueError("a route needs at least one stop")
     to_stop = [graph.times_to(s.node) for s in stops]
@@ -175,114 +264,78 @@ def plan_route(
         rest[k] = stops[k].dwell_s + leg + rest[k + 1]
     if rest[0] == INF or start not in to_stop[0]:
         raise NoRoute(f"no path from {start} through {[s.node for s in stops]}")
-    # the search runs on node indices (graph.ids): list look-ups instead of dict ones
     ids, index = graph.ids, graph.index
-    h_to = [t.by_index for t in to_stop]
-    stop_k = [index[s.node] for s in stops]
-    stop_nodes = {s.node for s in stops}
-    avoid = frozenset(avoid) - stop_nodes if stop_nodes & avoid else avoid
-    gap_cache: list[list[tuple[float, float]] | None] = [None] * len(ids)
-    safe, visits = table.safe_intervals, table.visits
-
-    car = graph.car_like
     held = t0_s if held_since_s is None else min(held_since_s, t0_s)
     s0 = index[start]
-    g0 = gap_cache[s0] = safe(start, serial)
-    i0 = next((i for i, (a, b) in enumerate(g0) if a <= held and t0_s < b), None)
-    if i0 is None:
-        raise NoRoute(f"{start} is not free for {serial} at t={t0_s:.1f} s")
-    a0 = arrived_by if car else None
-    # a state: (node, the arc it arrived by (car-like only), safe interval, stops done)
-    Key = tuple[int, Arc | None, int, int]
-    k0: Key = (s0, a0, i0, 0)
-    best: dict[Key, float] = {k0: t0_s}
-    parent: dict[Key, tuple[Key, float] | None] = {k0: None}
-    # ties of f (many equally quick ways on a grid; f rounded to the microsecond so that sums
-    # in another order tie too) go to the state furthest along: -g; then by node (its index
-    # follows its name), interval, stops done, push order
-    heap: list[tuple[float, float, int, int, int, int, Key]] = [
-        (round(t0_s + weight * (h_to[0][s0] + rest[0]), 6), -t0_s, s0, i0, 0, 0, k0)
-    ]
-    pushed = 1
-    expansions = 0
-    goal: Key | None = None
-    last = len(stops) - 1
-    out_k = graph.out_k
-    while heap:
-        item = heappop(heap)
-        key = item[6]
-        a = -item[1]
-        if a > best[key]:
-            continue  # a quicker way here was found since (and expanded, or is queued)
-        expansions += 1
-        if expansions > max_expansions:
+    car = graph.car_like
+    net = graph.arrays()
+    if car and arrived_by is None:
+        start_exits = np.array(
+            [net.arc_pos[a] for a, _ in graph.exits_k(None, s0, heading_rad)], np.int64
+        )
+    else:
+        start_exits = net.no_arcs
+    held_from, held_until, vehicle, count = table.rows(ids, index)
+    space = table.workspace
+    assert space is not None  # made by rows()
+    args = (
+        net.out_off,
+        net.out_end,
+        net.out_time_s,
+        car,
+        net.exit_off,
+        net.exit_arc,
+        start_exits,
+        net.arc_pos[arrived_by] if car and arrived_by is not None else -1,
+        held_from,
+        held_until,
+        vehicle,
+        count,
+        table.code(serial),
+        np.stack([t.array for t in to_stop]),
+        np.array(rest, np.float64),
+        np.array([index[s.node] for s in stops], np.int64),
+        np.array([s.dwell_s for s in stops], np.float64),
+        graph.avoid_mask(avoid, [s.node for s in stops]),
+        s0,
+        float(held),
+        float(t0_s),
+        stop_at_start,
+        float(weight),
+        max_expansions,
+    )
+    while True:
+        nodes, arrive, depart, done, expansions = search(
+            *args,
+            space.gap_at,
+            space.gaps,
+            space.slots,
+            space.s_int,
+            space.s_time,
+            space.h_int,
+            space.h_time,
+            space.heap,
+            space.c_int,
+            space.c_time,
+        )
+        if expansions != -2:
             break
-        u, came, i, k = key
-        gu = gap_cache[u]
-        assert gu is not None  # every state's node had its gaps looked up when pushed
-        hi = gu[i][1]
-        exits = graph.exits_k(came, u, heading_rad) if car else out_k[u]
-        if u == stop_k[k] and (stop_at_start or parent[key] is not None):
-            if k == last:
-                if hi == INF and (exits or not out_k[u]):
-                    goal = key
-                    break
-            else:
-                a2 = a + stops[k].dwell_s
-                nk: Key = (u, came, i, k + 1)
-                if a2 < hi and a2 < best.get(nk, INF):
-                    best[nk], parent[nk] = a2, (key, -1.0)
-                    h = h_to[k + 1][u] + rest[k + 1]
-                    heappush(heap, (round(a2 + weight * h, 6), -a2, u, i, k + 1, pushed, nk))
-                    pushed += 1
-        tk, rk = h_to[k], rest[k]
-        for arc, v in exits:
-            h = tk[v]
-            if h == INF or ids[v] in avoid:
-                continue
-            gv = gap_cache[v]
-            if gv is None:  # (most nodes have no visits: no call for them)
-                name = ids[v]
-                gv = gap_cache[v] = safe(name, serial) if name in visits else FREE
-            dt = arc.time_s
-            for j, (lo, hi2) in enumerate(gv):
-                if hi2 <= a:
-                    continue
-                d = a if a > lo else lo
-                arrive = d + dt
-                if arrive >= hi:
-                    break  # cannot hold u until then (later gaps start later still)
-                if arrive >= hi2:
-                    continue
-                nk = (v, arc if car else None, j, k)
-                if arrive < best.get(nk, INF):
-                    best[nk], parent[nk] = arrive, (key, d)
-                    f = round(arrive + weight * (h + rk), 6)
-                    heappush(heap, (f, -arrive, v, j, k, pushed, nk))
-                    pushed += 1
-    if goal is None:
+        space.grow()  # and search again, with room enough
+    if expansions == -1:
+        raise StartTaken(f"{start} is not free for {serial} at t={t0_s:.1f} s")
+    if nodes.size == 0:
         raise NoRoute(
             f"no conflict-free route for {serial} from {start} through "
             f"{[s.node for s in stops]} ({expansions} states searched)"
         )
-    # walk back: (key, departure from the previous key's node; -1 marks a stop done there)
-    chain: list[tuple[Key, float]] = []
-    key_: Key | None = goal
-    dep = INF
-    while key_ is not None:
-        chain.append((key_, dep))
-        p = parent[key_]
-        if p is None:
-            break
-        key_, dep = p
-    chain.reverse()
     steps: list[Step] = []
-    for key_k, depart in chain:
-        k = key_k[3]
+    for u, a, d, k in zip(
+        nodes.tolist(), arrive.tolist(), depart.tolist(), done.tolist(), strict=True
+    ):
         if steps and steps[-1].depart_s == -1.0:  # stop k - 1 was done on this very node
-            steps[-1].stop, steps[-1].depart_s = k - 1, depart
+            steps[-1].stop, steps[-1].depart_s = k - 1, d
             continue
-        steps.append(Step(ids[key_k[0]], best[key_k], depart))
+        steps.append(Step(ids[u], a, d))
     steps[-1].depart_s, steps[-1].stop = INF, len(stops) - 1
     return steps
 
