@@ -77,14 +77,16 @@ class Battery:
         return self.charge_pct / self.drive_pct_m if self.drive_pct_m > 0 else 0.0
 
     def state_json(self, v3: bool) -> dict:
+        charge, per_m = float(self._charge_pct[0]), float(self._drive_pct_m[0])
+        reach = charge / per_m if per_m > 0 else 0.0  # reach_m, read once (every state has it)
         if v3:
             return {
-                "stateOfCharge": round(self.charge_pct, 3),
+                "stateOfCharge": round(charge, 3),
                 "charging": self.charging,
-                "range": round(self.reach_m, 3),
+                "range": round(reach, 3),
             }
         return {
-            "batteryCharge": round(self.charge_pct, 3),
+            "batteryCharge": round(charge, 3),
             "charging": self.charging,
-            "reach": round(self.reach_m, 3),
+            "reach": round(reach, 3),
         }

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
 TOPICS_OUT = ("state", "visualization", "connection", "factsheet")
 
 
+@lru_cache(maxsize=16)  # a fleet's vehicles share the epoch and stamp many messages a step
 def iso_time(epoch: datetime, t_s: float) -> str:
     """ISO 8601 UTC with milliseconds, e.g. 2026-11-25T07:40:03.120Z."""
     t = epoch + timedelta(seconds=round(t_s, 3))
@@ -131,7 +133,10 @@ def periodic_state(v: Vehicle, last: dict) -> dict:
     message with a new header, position, velocity, battery and distance since the node.
     The same dict ``state`` would build, for a fraction of the work."""
     out = dict(last)
-    out.update(v.stamp.header("state", v.t_s))
+    stamp = v.stamp  # the header's other fields are the last state's
+    out["headerId"] = n = stamp.counters.get("state", -1) + 1
+    stamp.counters["state"] = n
+    out["timestamp"] = iso_time(stamp.epoch, v.t_s)
     out["distanceSinceLastNode"] = round(v.distance_since_node_m, 4)
     out["velocity"] = velocity_json(v.twist)
     pos = position_json(v.pose, v.cfg.map_id, v.v3)
