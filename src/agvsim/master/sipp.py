@@ -87,6 +87,31 @@ class Workspace:
         self._make()
 
 
+@njit(inline="always")
+def _node_gaps(node, me, v_count, v_serial, va_s, vb_s, gaps, used):  # noqa: ANN001, ANN202
+    """Append ``node``'s free gaps for vehicle ``me`` (between the others' visits, sorted) to
+    ``gaps`` from row ``used``; the new end, or -1 when ``gaps`` is full. Inlined into the
+    search (numba's IR inlining: no call, no reference counting of the arrays)."""
+    room = gaps.shape[0]
+    lo = -INF
+    for q in range(v_count[node]):
+        if v_serial[node, q] != me:
+            va, vb = va_s[node, q], vb_s[node, q]
+            if va > lo:
+                if used == room:
+                    return -1
+                gaps[used, 0], gaps[used, 1] = lo, va
+                used += 1
+            if vb > lo:
+                lo = vb
+    if lo < INF:
+        if used == room:
+            return -1
+        gaps[used, 0], gaps[used, 1] = lo, INF
+        used += 1
+    return used
+
+
 @njit(cache=True)
 def search(
     out_off,  # noqa: ANN001 - numba arrays, see the module docstring
@@ -144,26 +169,13 @@ def search(
     slots[:, 0] = -1
     gap_at[:, 0] = -1
     used = n_s = size = pushed = n_c = 0
-    room_g, room_s, room_h, room_c = gaps.shape[0], s_int.shape[0], heap.shape[0], c_int.shape[0]
+    room_s, room_h, room_c = s_int.shape[0], heap.shape[0], c_int.shape[0]
 
     # the start: its gaps, the one it stands in, and it as the first successor
     gap_at[start, 0] = 0
-    lo = -INF
-    for q in range(v_count[start]):
-        if v_serial[start, q] != me:
-            va, vb = va_s[start, q], vb_s[start, q]
-            if va > lo:
-                if used == room_g:
-                    return nothing, np.empty(0), np.empty(0), nothing, -2
-                gaps[used, 0], gaps[used, 1] = lo, va
-                used += 1
-            if vb > lo:
-                lo = vb
-    if lo < INF:
-        if used == room_g:
-            return nothing, np.empty(0), np.empty(0), nothing, -2
-        gaps[used, 0], gaps[used, 1] = lo, INF
-        used += 1
+    used = _node_gaps(start, me, v_count, v_serial, va_s, vb_s, gaps, 0)
+    if used < 0:
+        return nothing, np.empty(0), np.empty(0), nothing, -2
     gap_at[start, 1] = used
     start_gap = -1
     for i in range(used):
@@ -295,22 +307,9 @@ def search(
                 continue
             if gap_at[v, 0] < 0:  # first reached: its gaps for this vehicle
                 gap_at[v, 0] = used
-                lo = -INF
-                for q in range(v_count[v]):
-                    if v_serial[v, q] != me:
-                        va, vb = va_s[v, q], vb_s[v, q]
-                        if va > lo:
-                            if used == room_g:
-                                return nothing, np.empty(0), np.empty(0), nothing, -2
-                            gaps[used, 0], gaps[used, 1] = lo, va
-                            used += 1
-                        if vb > lo:
-                            lo = vb
-                if lo < INF:
-                    if used == room_g:
-                        return nothing, np.empty(0), np.empty(0), nothing, -2
-                    gaps[used, 0], gaps[used, 1] = lo, INF
-                    used += 1
+                used = _node_gaps(v, me, v_count, v_serial, va_s, vb_s, gaps, used)
+                if used < 0:
+                    return nothing, np.empty(0), np.empty(0), nothing, -2
                 gap_at[v, 1] = used - gap_at[v, 0]
             o, cnt = gap_at[v, 0], gap_at[v, 1]
             # the first gap that ends after a (sorted, disjoint: binary search)
