@@ -74,27 +74,11 @@ def terminate_as_interrupt() -> Iterator[StopRequest]:
 @contextmanager
 def hold_signals() -> Iterator[None]:
     """Let Ctrl-C and SIGTERM wait until the block is done, then deliver them to the handlers
-    that were in place (a second Ctrl-C while waiting breaks through at once)."""
-    if not _on_main_thread():
+    that were in place (a second Ctrl-C while waiting breaks through at once): a
+    :class:`StepGuard` holding for the whole block."""
+    with StepGuard() as guard:
+        guard.holding = True
         yield
-        return
-    pending: list[int] = []
-
-    def hold(signum: int, frame: FrameType | None) -> None:
-        if signum == signal.SIGINT and signal.SIGINT in pending:
-            raise KeyboardInterrupt  # the user insists
-        pending.append(signum)
-
-    held = (signal.SIGINT, signal.SIGTERM)
-    previous = {s: signal.signal(s, hold) for s in held}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            if handler is not None:  # None: a handler not set from Python, left as it is
-                signal.signal(s, handler)
-        for signum in dict.fromkeys(pending):
-            signal.raise_signal(signum)
 
 
 class StepGuard:
