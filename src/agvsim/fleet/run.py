@@ -15,6 +15,7 @@ from typing import Any
 from agvsim.fleet.broker import EmbeddedBroker
 from agvsim.fleet.build import Fleet, build_fleet
 from agvsim.fleet.transport import BrokerAddress, MqttTransport
+from agvsim.gc_policy import long_run_gc
 from agvsim.scenario import Scenario
 from agvsim.sim.engine import Simulation
 
@@ -72,15 +73,16 @@ class FleetRun:
         sim = self.fleet.sim
         t0_wall, t0_sim = time.monotonic(), sim.state.t_s
         next_report = 0.0
-        while duration_s is None or sim.state.t_s - t0_sim < duration_s - 1e-9:
-            self.step()
-            if speed > 0:
-                due = t0_wall + (sim.state.t_s - t0_sim) / speed
-                while (left := due - time.monotonic()) > 0:
-                    self.transport.poll(left)
-            if progress is not None and time.monotonic() >= next_report:
-                next_report = time.monotonic() + 1.0
-                progress(sim.state.t_s)
+        with long_run_gc():  # agvsim.gc_policy
+            while duration_s is None or sim.state.t_s - t0_sim < duration_s - 1e-9:
+                self.step()
+                if speed > 0:
+                    due = t0_wall + (sim.state.t_s - t0_sim) / speed
+                    while (left := due - time.monotonic()) > 0:
+                        self.transport.poll(left)
+                if progress is not None and time.monotonic() >= next_report:
+                    next_report = time.monotonic() + 1.0
+                    progress(sim.state.t_s)
 
     def close(self) -> None:
         self.transport.close()
