@@ -390,3 +390,28 @@ def test_a_short_horizon_changes_the_messages_not_the_motion() -> None:
     assert longest[2] == 2 < longest[None]
     for orders in runs[2][2].values():
         assert_base_and_horizon(orders)
+
+
+def test_states_as_decoded_json_give_the_same_run() -> None:
+    """In-process, a vehicle's periodic state shares its event fields (actions, nodes,
+    errors) with the state before it, and the master skips re-reading those; over MQTT every
+    state is decoded afresh and read whole. Both must lead to the same decisions."""
+    import json
+
+    from agvsim.master.run import MasterLink
+
+    class AsOnTheWire(MasterLink):
+        def on_step(self, sim) -> None:  # noqa: ANN001
+            for v in self.fleet.vehicles:
+                v.outbox = [(t, json.loads(json.dumps(m)), r) for t, m, r in v.outbox]
+            super().on_step(sim)
+
+    cfg = MasterConfig(generate=GenerateConfig(rate_per_h=400))
+    shared = InProcessRun(warehouse(4, cfg), seed=2, duration_s=200, master_period_s=0.25)
+    wire = InProcessRun(warehouse(4, cfg), seed=2, duration_s=200, master_period_s=0.25)
+    wire.observers[-1] = AsOnTheWire(wire.master, wire.fleet, wire.period_s)
+    shared.run()
+    wire.run()
+    assert shared.summary()["orders_completed"] > 3
+    assert shared.summary() == wire.summary()
+    assert np.array_equal(shared.fleet.sim.state.poses, wire.fleet.sim.state.poses)

@@ -58,6 +58,8 @@ class Agv:
     road: RoadGraph | None = None  # its routing graph (Master.graph), once known
     _battery_of: dict | None = field(default=None, repr=False, compare=False)
     _battery_now: tuple[float, bool] = field(default=(100.0, False), repr=False, compare=False)
+    _ended_of: list | None = field(default=None, repr=False, compare=False)
+    _ended_n: int = field(default=0, repr=False, compare=False)
 
     @property
     def battery_pct(self) -> float:
@@ -76,6 +78,15 @@ class Agv:
             self._battery_now = (pct, bool(bs.get("charging", False)))
             self._battery_of = st
         return self._battery_now
+
+    def ended(self) -> int:
+        """How many of the last state's actions are FINISHED or FAILED (counted once per
+        list of action states: a periodic state shares its predecessor's)."""
+        acts = (self.state or {}).get("actionStates", [])
+        if self._ended_of is not acts:
+            self._ended_n = sum(x.get("actionStatus") in ENDED for x in acts)
+            self._ended_of = acts
+        return self._ended_n
 
     @property
     def heading_rad(self) -> float | None:

@@ -62,6 +62,29 @@ def wait_cycles(waits: dict[str, str]) -> list[frozenset[str]]:
     return found
 
 
+# what ``Master._progress_once`` reads of a state: a vehicle's periodic state (agvsim.fleet.
+# messages.periodic_state) shares these very objects with the state before it
+EVENT_FIELDS = (
+    "errors",
+    "orderId",
+    "lastNodeId",
+    "lastNodeSequenceId",
+    "actionStates",
+    "nodeStates",
+)
+
+
+def _same_events(old: dict | None, new: dict | None) -> bool:
+    """``new`` tells the master's progress nothing that ``old`` did not: the same message,
+    or one whose event fields are the same objects (a state received over MQTT is decoded
+    afresh: it compares unequal here and is read whole)."""
+    if old is new:
+        return True
+    if old is None or new is None:
+        return False
+    return all(old.get(k) is new.get(k) for k in EVENT_FIELDS)
+
+
 class Master:
     def __init__(
         self,
@@ -257,10 +280,11 @@ class Master:
         """What the vehicle's last state tells: passed nodes (their visits released),
         finished actions, a drop, an order done, a breakdown. Idempotent: when neither the
         state nor the master's record of the vehicle changed since the last call, it is
-        skipped (about half the vehicles a tick at 1,000 vehicles)."""
-        seen = (agv.state, self._progress_key(agv))
-        if agv.progress_seen is not None and agv.progress_seen[0] is seen[0]:
-            if agv.progress_seen[1] == seen[1]:
+        skipped (most vehicles at most ticks: a periodic state, which only moved the
+        vehicle on, tells nothing new)."""
+        seen = agv.progress_seen
+        if seen is not None and _same_events(seen[0], agv.state):
+            if seen[1] == self._progress_key(agv):
                 return
         self._progress_once(agv, t_s, out)
         agv.progress_seen = (agv.state, self._progress_key(agv))
@@ -462,13 +486,7 @@ class Master:
                     a.progress, a.progress_s, a.stalled = (), t_s, False
                 continue
             st = a.state or {}
-            key = (
-                st.get("lastNodeSequenceId"),
-                a.order_id,
-                a.update_id,
-                sum(x.get("actionStatus") in ENDED for x in st.get("actionStates", [])),
-                a.job,
-            )
+            key = (st.get("lastNodeSequenceId"), a.order_id, a.update_id, a.ended(), a.job)
             if key != a.progress:
                 a.progress, a.progress_s, a.stalled = key, t_s, False
             elif t_s - a.progress_s > self.cfg.stall_s and not a.stalled:
