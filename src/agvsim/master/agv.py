@@ -27,6 +27,7 @@ class Agv:
     home: str | None = None
     map_id: str = "map"
     state: dict | None = None
+    ready: bool = False  # its home, type and a state are known: the master may plan for it
     broken: bool = False
     # the route: steps, their visits (None once released), what is granted and sent
     route: list[Step] = field(default_factory=list)

@@ -62,27 +62,24 @@ def wait_cycles(waits: dict[str, str]) -> list[frozenset[str]]:
     return found
 
 
-# what ``Master._progress_once`` reads of a state: a vehicle's periodic state (agvsim.fleet.
-# messages.periodic_state) shares these very objects with the state before it
-EVENT_FIELDS = (
-    "errors",
-    "orderId",
-    "lastNodeId",
-    "lastNodeSequenceId",
-    "actionStates",
-    "nodeStates",
-)
-
-
 def _same_events(old: dict | None, new: dict | None) -> bool:
     """``new`` tells the master's progress nothing that ``old`` did not: the same message,
-    or one whose event fields are the same objects (a state received over MQTT is decoded
-    afresh: it compares unequal here and is read whole)."""
+    or one whose event fields (what ``Master._progress_once`` reads) are the same objects, as
+    in a vehicle's periodic state (``agvsim.fleet.messages.periodic_state``). A state
+    received over MQTT is decoded afresh: it compares unequal here and is read whole."""
     if old is new:
         return True
     if old is None or new is None:
         return False
-    return all(old.get(k) is new.get(k) for k in EVENT_FIELDS)
+    get, was = new.get, old.get  # written out: this runs for every vehicle at every tick
+    return (
+        was("actionStates") is get("actionStates")
+        and was("lastNodeSequenceId") is get("lastNodeSequenceId")
+        and was("lastNodeId") is get("lastNodeId")
+        and was("nodeStates") is get("nodeStates")
+        and was("orderId") is get("orderId")
+        and was("errors") is get("errors")
+    )
 
 
 class Master:
@@ -156,6 +153,7 @@ class Master:
                 v = Visit(serial, node, 0, self.t_s, INF, granted=True)
                 agv.visits = [v]
                 self.table.add(v)
+        agv.ready = agv.home is not None and agv.vehicle_type is not None and agv.state is not None
 
     # ------------------------------------------------------------------ helpers
     def graph(self, agv: Agv) -> RoadGraph:
@@ -175,8 +173,9 @@ class Master:
     def static_time(self, agv: Agv, a: str, b: str) -> float:
         return self.graph(agv).times_to(b).get(a, INF)
 
-    def _ready(self, agv: Agv) -> bool:
-        return agv.home is not None and agv.vehicle_type is not None and agv.state is not None
+    @staticmethod
+    def _ready(agv: Agv) -> bool:
+        return agv.ready  # home, type and a state known (set by ``receive``)
 
     def chargers(self, agv: Agv) -> list[str]:
         """The nodes where ``agv`` can charge (a node offering ``startCharging``)."""
