@@ -179,3 +179,27 @@ def test_a_periodic_state_is_the_state_built_afresh(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(messages, "periodic_state", both)
     fleet_run(True, seconds=80.0)
     assert checked[0] > 300
+
+
+def test_a_periodic_publish_leaves_the_bank_as_a_full_settle_would(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """After a periodic message from the batch tick the vehicle updates only its wake-up
+    time in the bank; a full ``_settle`` at that moment must write the very same row."""
+    from agvsim.fleet.vehicle import Vehicle
+
+    light = Vehicle.publish_periodic
+    fields = ("next_node_s", "next_wake_s", "driving", "quiet", "has_leg")
+    checked = [0]
+
+    def both(v: Vehicle) -> None:
+        light(v)
+        b, k = v._b, v._k
+        after = [getattr(b, f)[k].copy() for f in fields]
+        v._settle()
+        assert [getattr(b, f)[k] for f in fields] == after
+        checked[0] += 1
+
+    monkeypatch.setattr(Vehicle, "publish_periodic", both)
+    fleet_run(True, seconds=80.0)
+    assert checked[0] > 300

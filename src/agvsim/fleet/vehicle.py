@@ -274,12 +274,13 @@ class Vehicle:
             if i is not None and i < len(leg.nodes) - 1:
                 nxt = leg.node_s[i]
         b.next_node_s[k] = nxt
-        c = self.cfg
-        b.next_wake_s[k] = min(
-            self._next_state_s, self._next_vis_s if c.vis_period_s > 0 else math.inf
-        )
+        b.next_wake_s[k] = self._wake_s()
         b.driving[k] = self.driving
         b.quiet[k] = self._quiet()
+
+    def _wake_s(self) -> float:
+        """When a periodic message is next due (the batch tick hands the vehicle back then)."""
+        return min(self._next_state_s, self._next_vis_s if self.cfg.vis_period_s > 0 else math.inf)
 
     # ------------------------------------------------------------------ the public surface
     def receive(self, topic: str, payload: Any) -> None:
@@ -327,9 +328,11 @@ class Vehicle:
 
     def publish_periodic(self) -> None:
         """The batch tick did this vehicle's control tick and its periodic state or
-        visualization is due: publish it."""
+        visualization is due: publish it. The tick changed only what the bank holds (motion,
+        charge, time) and a quiet vehicle has no event to publish, so of what ``_settle``
+        tells the bank only the next wake-up time changes (tests/test_fleet_bank.py)."""
         self._publish_due()
-        self._settle()
+        self._b.next_wake_s[self._k] = self._wake_s()
 
     def node_states(self) -> tuple[list[dict], int]:
         """``state.nodeStates`` and how many of those nodes are released. The route only
