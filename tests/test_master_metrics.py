@@ -20,6 +20,9 @@ class FakeMaster:
     def waiting(self, agv: Agv) -> bool:
         return self.waiting_at.get(agv.serial, False)
 
+    def pace_summary(self) -> dict:
+        return {}
+
 
 def state(driving: bool, loaded: bool = False, battery: float = 80.0) -> dict:
     return {

@@ -31,6 +31,7 @@ from agvsim.master.dispatch import POLICIES
 from agvsim.master.graph import RoadGraph
 from agvsim.master.metrics import Metrics
 from agvsim.master.orders import Transport
+from agvsim.master.pace import GRANT_LEAD_S, Pace
 from agvsim.master.traffic import (
     INF,
     NoRoute,
@@ -114,6 +115,7 @@ class Master:
         # utilisation is looked at again (metrics are O(changes) a tick)
         self._touched: set[str] = set()
         self._chargers: dict[str | None, list[str]] = {}  # by vehicle type
+        self.pace: dict[RoadGraph, Pace] = {}  # learnt, by routing graph (agvsim.master.pace)
 
     # ------------------------------------------------------------------ input
     def receive(self, serial: str, topic: str, msg: dict) -> None:
@@ -225,6 +227,7 @@ class Master:
                 arrived_by=arrived_by,
                 heading_rad=agv.heading_rad,
                 weight=self.cfg.plan_weight,
+                time_scale=self.pace_of(agv).scale,
             )
         except StartTaken:
             agv.blocked_at = (*blocked, t0)
@@ -257,7 +260,10 @@ class Master:
             agv.orders_sent += 1
             agv.order_id = f"{agv.serial}-{agv.orders_sent:05d}"
             agv.update_id, agv.granted, agv.sent, agv.reached = 0, 0, -1, 0
+            agv.grant_t, agv.reach_t = {0: t_s}, {}
             agv.order_done = False
+        else:  # the steps after the decision point are new: so are their grants
+            agv.grant_t = {i: t for i, t in agv.grant_t.items() if i <= g}
         agv.changed = True
         self._touched.add(agv.serial)
         return True
@@ -272,6 +278,7 @@ class Master:
                 break
             self.table.grant(v)
             agv.granted += 1
+            agv.grant_t[agv.granted] = self.t_s
             self._touched.add(agv.serial)
 
     # ------------------------------------------------------------------ per vehicle
@@ -321,6 +328,7 @@ class Master:
         if st.get("lastNodeId") != agv.route[min(reached, len(agv.route) - 1)].node:
             return
         if reached > agv.reached:
+            self._paced(agv, agv.reached, reached, t_s)
             agv.reached = reached
             self._touched.add(agv.serial)
         for i in range(agv.reached):
@@ -353,6 +361,43 @@ class Master:
                 agv.job = "charging"
             elif agv.job == "home":
                 agv.job = "idle"
+
+    def pace_of(self, agv: Agv) -> Pace:
+        """How much slower than its routing graph says ``agv``'s kind drives (learnt)."""
+        g = self.graph(agv)
+        got = self.pace.get(g)
+        if got is None:
+            got = self.pace[g] = Pace()
+        return got
+
+    def pace_summary(self) -> dict[str, dict[str, float]]:
+        """The learnt pace by routing graph: the scale routes are planned with, the samples."""
+        out = {}
+        for (vt, speed, radius), g in sorted(self._graphs.items(), key=lambda kv: str(kv[0])):
+            p = self.pace.get(g)
+            if p is not None:
+                name = f"{vt or 'any type'}, {speed:g} m/s"
+                name += f", R {radius:g} m" if radius else ""
+                out[name] = {"scale": round(p.scale, 4), "samples": p.samples}
+        return out
+
+    def _paced(self, agv: Agv, before: int, now: int, t_s: float) -> None:
+        """The vehicle reported route node ``now`` (the last one was ``before``) at ``t_s``:
+        an edge it drove through without stopping is a sample of its pace (agvsim.master.
+        pace: its end granted ``GRANT_LEAD_S`` before it reached the start, no action and no
+        planned wait at the start)."""
+        since = agv.reach_t.get(before)
+        agv.reach_t = {now: t_s}
+        if since is None or now != before + 1:
+            return
+        granted = agv.grant_t.get(now)
+        prev, step = agv.route[before], agv.route[now]
+        if granted is None or granted > since - GRANT_LEAD_S or agv.actions.get(before):
+            return
+        if prev.depart_s - prev.arrive_s > 1e-6:  # a planned wait there
+            return
+        arc = self.graph(agv).arc(prev.node, step.node)
+        self.pace_of(agv).add(t_s - since, arc.time_s)
 
     def _send_to_charger(self, agv: Agv, t_s: float) -> bool:
         taken = {a.charger for a in self.agvs.values() if a is not agv and a.charger}

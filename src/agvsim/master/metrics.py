@@ -124,4 +124,5 @@ class Metrics:
             "breakdowns": self.breakdowns,
             "replan_failures": m.replan_failures,
             "late_replans": self.retimed,
+            "plan_pace": m.pace_summary(),
         }

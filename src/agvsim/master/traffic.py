@@ -242,6 +242,7 @@ def plan_route(
     arrived_by: Arc | None = None,
     heading_rad: float | None = None,
     weight: float = 1.0,
+    time_scale: float = 1.0,
 ) -> list[Step]:
     """The quickest route from ``start`` (at ``t0_s``) through ``stops`` that fits the gaps
     of ``table``, ending parked on the last stop. The vehicle has held ``start`` since
@@ -253,14 +254,16 @@ def plan_route(
     it can drive off again; ``arrived_by`` is how it reaches ``start`` (None: it stands there,
     facing ``heading_rad``). ``weight`` > 1: weighted A* (f = g + weight h), a route at most
     ``weight`` times slower than the quickest that fits, found after far fewer states (the
-    quickest one costs a search over every state that could beat it). The search itself is
+    quickest one costs a search over every state that could beat it). ``time_scale``: every
+    travel time of the graph (edges, the heuristic's tables) times this, for vehicles that
+    take longer than the graph says (``Pace``); dwells are not scaled. The search itself is
     ``agvsim.master.sipp.search`` (numba). Raises NoRoute."""
     if not stops:
         raise ValueError("a route needs at least one stop")
     to_stop = [graph.times_to(s.node) for s in stops]
     rest = [0.0] * len(stops)  # from stop k to the end: legs between stops and dwells
     for k in range(len(stops) - 2, -1, -1):
-        leg = to_stop[k + 1].get(stops[k].node, INF)
+        leg = to_stop[k + 1].get(stops[k].node, INF) * time_scale
         rest[k] = stops[k].dwell_s + leg + rest[k + 1]
     if rest[0] == INF or start not in to_stop[0]:
         raise NoRoute(f"no path from {start} through {[s.node for s in stops]}")
@@ -278,10 +281,14 @@ def plan_route(
     held_from, held_until, vehicle, count = table.rows(ids, index)
     space = table.workspace
     assert space is not None  # made by rows()
+    heuristic = np.stack([t.array for t in to_stop])
+    arc_times = net.out_time_s
+    if time_scale != 1.0:
+        heuristic, arc_times = heuristic * time_scale, arc_times * time_scale
     args = (
         net.out_off,
         net.out_end,
-        net.out_time_s,
+        arc_times,
         car,
         net.exit_off,
         net.exit_arc,
@@ -292,7 +299,7 @@ def plan_route(
         vehicle,
         count,
         table.code(serial),
-        np.stack([t.array for t in to_stop]),
+        heuristic,
         np.array(rest, np.float64),
         np.array([index[s.node] for s in stops], np.int64),
         np.array([s.dwell_s for s in stops], np.float64),
