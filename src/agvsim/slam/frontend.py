@@ -76,8 +76,12 @@ class TrackingConfig:
     # learnt spread is odometry's error that does not build up (.fusion.OdometryFusion)
     match_ceiling_m: float = 0.05
     match_ceiling_rad: float = math.radians(1.0)
-    lost_score: float = 0.35  # below it after the wide search for lost_scans scans: relocalise
+    lost_score: float = 0.35  # below it after the wide search: lost (relocalise_scans, lost_scans)
     lost_scans: int = 3
+    # a scan under lost_score even after the wide search is looked for over
+    # +-relocalise_window_m and every heading in the submap from this many such scans in a row
+    # (1: at once; between sparse scans the robot moves and turns far)
+    relocalise_scans: int = 1
     relocalise_window_m: float = 2.0  # relocalisation search: +- this, all headings
     global_min_score: float = 0.7  # global relocalisation (all submaps) accepted from this score
     global_points: int = 48  # scan points the global search places (then all are refined)
@@ -346,7 +350,7 @@ class Tracker:
                     0.0,
                 )
         self._lost = self._lost + 1 if score < cfg.lost_score else 0
-        if self._lost >= cfg.lost_scans:
+        if self._lost >= cfg.relocalise_scans:
             pose, score = self._relocalise(s, points, guess, ang_step, pose, score)
         # a poor fit even after the wide search: kidnapped, or entering unmapped space
         self.poor = self.poor + 1 if score < cfg.retry_score else 0
@@ -360,6 +364,8 @@ class Tracker:
         at_guess = sm.score_pose(s.likelihood, s.ox, s.oy, res, points, guess)
         match_var = None if self.fusion is None else self.fusion.match_variance()
         self.doubted = self.check.disagrees(guess, pose, score, at_guess, odom_var, match_var)
+        if score >= cfg.retry_score:
+            self.check.record(guess, pose)
         if self.doubted and score < cfg.retry_score and not self.check.stall:
             # a scan that fits poorly even at its best match (a corner seen for the first time
             # between sparse scans) does not refute odometry: in a maze of look-alike corners a

@@ -29,6 +29,7 @@ and ``max_window_rad`` / the wide window.
 
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass
 
@@ -59,6 +60,8 @@ class DoubtConfig:
     window_sigmas: float = 3.0
     max_window_m: float = 0.4
     max_window_rad: float = math.radians(45.0)
+    recent_scans: int = 50  # the heading window covers the disagreements of this many scans
+    recent_factor: float = 1.5
 
 
 class OdometryCheck:
@@ -75,6 +78,8 @@ class OdometryCheck:
         self.frozen = False  # odometry did not change at all since the scan before
         self.last_pose: F64 | None = None
         self.last_motion: F64 | None = None  # tracked motion of the last scan
+        # |heading| by which recent matches differed from their prediction (windows())
+        self.recent_dth: collections.deque[float] = collections.deque(maxlen=cfg.recent_scans)
         self._moving = False
 
     def candidates(self, prev_pose: F64, prev_odom: F64, odom: F64) -> list[F64]:
@@ -108,10 +113,15 @@ class OdometryCheck:
         if s is None or not self.cfg.enabled:
             return base_m, base_rad
         k = self.cfg.window_sigmas
+        seen = self.cfg.recent_factor * max(self.recent_dth, default=0.0)
         return (
             min(max(base_m, k * s[0]), max(self.cfg.max_window_m, base_m)),
-            min(max(base_rad, k * s[1]), max(self.cfg.max_window_rad, base_rad)),
+            min(max(base_rad, k * s[1], seen), max(self.cfg.max_window_rad, base_rad)),
         )
+
+    def record(self, guess: F64, match: F64) -> None:
+        """Remember by how much a match that fits turned away from its prediction."""
+        self.recent_dth.append(abs(float(between(guess, match)[2])))
 
     def disagrees(
         self,
@@ -129,15 +139,6 @@ class OdometryCheck:
         if self.stall:
             return True
         mv = match_var or (0.0, 0.0)
-        if self.frozen and self.last_pose is not None:
-            # odometry froze as the robot *started* moving (a stall after a standstill):
-            # the match moved clearly beyond its own noise while odometry did not change
-            m = between(self.last_pose, match)
-            c = self.cfg
-            if math.hypot(m[0], m[1]) >= max(c.moving_m, 3.0 * math.sqrt(2.0 * mv[0])) or abs(
-                m[2]
-            ) >= max(c.moving_rad, 3.0 * math.sqrt(mv[1])):
-                return True
         if score_match - score_guess < self.cfg.margin:
             return False
         d = between(guess, match)
