@@ -366,11 +366,6 @@ class Tracker:
         self.doubted = self.check.disagrees(guess, pose, score, at_guess, odom_var, match_var)
         if score >= cfg.retry_score:
             self.check.record(guess, pose)
-        if self.doubted and score < cfg.retry_score and not self.check.stall:
-            # a scan that fits poorly even at its best match (a corner seen for the first time
-            # between sparse scans) does not refute odometry: in a maze of look-alike corners a
-            # poor best fit can lie a right angle off
-            pose, score, self.doubted = guess.copy(), at_guess, False
         self.odom_suspect |= self.doubted
         if self.fusion is not None and not self.doubted:
             step = between(self.pose, guess) if self.pose is not None else None
