@@ -364,8 +364,6 @@ class Tracker:
         at_guess = sm.score_pose(s.likelihood, s.ox, s.oy, res, points, guess)
         match_var = None if self.fusion is None else self.fusion.match_variance()
         self.doubted = self.check.disagrees(guess, pose, score, at_guess, odom_var, match_var)
-        if score >= cfg.retry_score:
-            self.check.record(guess, pose)
         self.odom_suspect |= self.doubted
         if self.fusion is not None and not self.doubted:
             step = between(self.pose, guess) if self.pose is not None else None

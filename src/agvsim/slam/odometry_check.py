@@ -29,7 +29,6 @@ and ``max_window_rad`` / the wide window.
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import dataclass
 
@@ -60,8 +59,6 @@ class DoubtConfig:
     window_sigmas: float = 3.0
     max_window_m: float = 0.4
     max_window_rad: float = math.radians(45.0)
-    recent_scans: int = 50  # the heading window covers the disagreements of this many scans
-    recent_factor: float = 1.5
 
 
 class OdometryCheck:
@@ -78,8 +75,6 @@ class OdometryCheck:
         self.frozen = False  # odometry did not change at all since the scan before
         self.last_pose: F64 | None = None
         self.last_motion: F64 | None = None  # tracked motion of the last scan
-        # |heading| by which recent matches differed from their prediction (windows())
-        self.recent_dth: collections.deque[float] = collections.deque(maxlen=cfg.recent_scans)
         self._moving = False
 
     def candidates(self, prev_pose: F64, prev_odom: F64, odom: F64) -> list[F64]:
@@ -113,15 +108,10 @@ class OdometryCheck:
         if s is None or not self.cfg.enabled:
             return base_m, base_rad
         k = self.cfg.window_sigmas
-        seen = self.cfg.recent_factor * max(self.recent_dth, default=0.0)
         return (
             min(max(base_m, k * s[0]), max(self.cfg.max_window_m, base_m)),
-            min(max(base_rad, k * s[1], seen), max(self.cfg.max_window_rad, base_rad)),
+            min(max(base_rad, k * s[1]), max(self.cfg.max_window_rad, base_rad)),
         )
-
-    def record(self, guess: F64, match: F64) -> None:
-        """Remember by how much a match that fits turned away from its prediction."""
-        self.recent_dth.append(abs(float(between(guess, match)[2])))
 
     def disagrees(
         self,
