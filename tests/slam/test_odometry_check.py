@@ -140,3 +140,28 @@ def test_freeze_then_jump_is_followed_by_scan_matching() -> None:
     assert doubted >= 60  # the frozen scans were caught (measured 83 of 80 frozen + jumps)
     assert err < 0.1  # measured 0.03 m
     assert blind > 1.0  # trusted blindly, each jump is added twice: measured 10 m
+
+
+def test_a_freeze_longer_than_max_doubt_scans_keeps_its_reference() -> None:
+    """A turn on the spot of 3 deg a scan with odometry frozen for 30 scans (more than
+    max_doubt_scans = 20): every frozen scan refutes odometry (a stall), the reference stays
+    at the scan before the freeze, and when odometry jumps by the whole 90 deg turn the
+    prediction from the reference is the true pose."""
+    chk = OdometryCheck(DoubtConfig(max_doubt_scans=20))
+    step = np.array([0.0, 0.0, math.radians(3.0)])
+    pose = np.array([1.0, 2.0, 0.0])
+    odom = np.array([5.0, 5.0, 1.0])  # odometry in its own frame
+    chk.accept(pose.copy(), odom.copy(), doubted=False)
+    chk.accept(pose := pose + step, odom := odom + step, doubted=False)  # moving
+    frozen = odom.copy()
+    for k in range(30):
+        cands = chk.candidates(pose, frozen, frozen)
+        # scan to scan, the last motion, and from the second frozen scan the reference
+        assert chk.stall and chk.frozen and len(cands) == (2 if k == 0 else 3)
+        pose = pose + step  # tracking follows the turn (the last-motion candidate)
+        assert chk.disagrees(cands[0], pose, 0.9, 0.9, (1e-6, 1e-6), (1e-6, 1e-6))
+        chk.accept(pose.copy(), frozen, doubted=True)
+    assert chk.since_ref == 31 and chk.n_doubted == 30
+    jumped = frozen + 30 * step  # odometry moves again: 90 deg in one message
+    cands = chk.candidates(pose, frozen, jumped)
+    np.testing.assert_allclose(cands[-1], [1.0, 2.0, math.radians(93.0)], atol=1e-12)

@@ -99,3 +99,31 @@ def test_odometry_scale_error_is_estimated() -> None:
     # standing still: nothing to estimate from
     fusion, *_ = feed(sigma_match=0.002, sigma_odom=0.0, n=20, scale=1.05)
     assert fusion.scale() == 1.0
+
+
+def test_odometry_error_that_does_not_build_up_is_not_put_on_the_matches() -> None:
+    """Matches exact; odometry's heading off by white noise of 2 deg at every scan (smoothed
+    or lagging odometry: wrong on each turn, right again after): its increments are off by
+    2 * (2 deg)^2 in variance at every lag, which the two-lag model reads as match noise of
+    (2 deg)^2. Capped at (1 deg)^2, the rest, 2 * (4 - 1) = 6 deg^2 per scan, is odometry's,
+    and the heading gain moves to the matches (6 / 7)."""
+    rng = np.random.default_rng(4)
+    n = 400
+    step = np.array([0.2, 0.0, 0.01])
+    truth = [np.zeros(3)]
+    for _ in range(n - 1):
+        truth.append(compose(truth[-1], step))
+    t = np.array(truth)
+    odom = t.copy()
+    odom[:, 2] += rng.normal(0.0, np.radians(2.0), n)
+    for caps, s_o_deg2, gain in (
+        ((np.inf, np.inf), 0.0, 0.0),
+        ((0.05, np.radians(1.0)), 6.0, 6 / 7),
+    ):
+        fusion = OdometryFusion(window=300, lag=10, match_ceilings=caps)
+        for k in range(1, n):
+            fusion.fuse(t[k], t[k], np.eye(3))
+            fusion.add(odom[k])
+        _, _, k_rot, s_or = fusion.estimate()
+        assert np.degrees(np.sqrt(s_or)) ** 2 == pytest.approx(s_o_deg2, abs=1.0)
+        assert k_rot == pytest.approx(gain, abs=0.05)

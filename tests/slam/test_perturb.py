@@ -113,3 +113,73 @@ def test_bad_fault_settings_are_refused() -> None:
     with pytest.raises(ValueError):
         list(apply_fault(scans(3), "melt", np.random.default_rng(0)))
     assert math.isfinite(FaultConfig().heading_bias_rad_per_s)
+
+
+def turning_scans() -> list[LaserScan]:
+    """Straight 0.1 m a scan for 30 scans, then a 90 deg turn on the spot in 9 scans of
+    10 deg, and so on: 10 such legs (a square path driven 2.5 times)."""
+    pose = np.array([0.0, 0.0, 0.0])
+    out = []
+    for leg in range(10):
+        for k in range(39):
+            t = (leg * 39 + k) * 0.2
+            out.append(LaserScan(t, -1.0, 0.5, 0.0, 80.0, np.ones(5), np.zeros(3), pose))
+            u = [0.1, 0.0, 0.0] if k < 30 else [0.0, 0.0, math.radians(10.0)]
+            pose = compose(pose, np.array(u))
+    return out
+
+
+def test_freeze_turn_freezes_on_turns_and_jumps_by_the_turn() -> None:
+    base = turning_scans()
+    cfg = FaultConfig(freeze_every_scans=20)
+    out = list(apply_fault(base, "freeze-turn", np.random.default_rng(3), cfg))
+    u = steps(out)
+    frozen = np.all(u == 0.0, axis=1)
+    starts = np.flatnonzero(np.diff(np.concatenate([[0], frozen.astype(int)])) == 1)
+    assert len(starts) >= 3
+    for s in starts:
+        end = s + int(np.argmin(frozen[s:])) if not frozen[s:].all() else len(frozen)
+        if end == len(frozen):
+            continue
+        # the jump after the freeze turns by 45-90 deg (in 10 deg steps: 50-90), the
+        # freeze lasts at most 9 scans, and odometry is the truth again after it
+        assert math.radians(49.0) <= abs(u[end, 2]) <= math.radians(91.0)
+        assert 1 <= end - s <= 9
+        np.testing.assert_allclose(out[end + 1].odom_pose, base[end + 1].odom_pose, atol=1e-9)
+    moving = np.concatenate([[True], ~frozen])
+    for r, b, m in zip(out, base, moving, strict=True):
+        if m:
+            np.testing.assert_allclose(r.odom_pose, b.odom_pose, atol=1e-9)
+
+
+def test_sparse_is_regular_and_long_loop_drifts_by_the_distance() -> None:
+    # the constant-motion log: the mean of equal increments is the increment itself
+    log = scans(rate_hz=4.0)  # stamps exact in binary: 1 Hz keeps every 4th scan
+
+    def faulty(fault: str, cfg: FaultConfig | None = None) -> list[LaserScan]:
+        return list(apply_fault(log, fault, np.random.default_rng(0), cfg))
+
+    t = [r.stamp_s for r in faulty("sparse")]
+    np.testing.assert_array_equal(np.diff(t), 1.0)
+    u = steps(faulty("sparse"))  # 4 scans a kept step: 0.4 m and 0.2 rad
+    true = compose_n(np.array([0.1, 0.0, 0.05]), 4)
+    np.testing.assert_allclose(u, np.tile(true, (len(u), 1)), atol=1e-12)
+    cfg = FaultConfig(drift_rad_per_m=0.02)
+    d = steps(faulty("long-loop", cfg))
+    np.testing.assert_allclose(d[:, 2] - true[2], 0.02 * math.hypot(true[0], true[1]), atol=1e-12)
+    # on the square path the smoothed odometry lags each turn by its smoothing and catches up
+    sq = list(apply_fault(turning_scans(), "sparse", np.random.default_rng(0), FaultConfig()))
+    o = np.array([r.odom_pose for r in sq])
+    truth = {r.stamp_s: r.odom_pose for r in turning_scans()}
+    tr = np.array([truth[r.stamp_s] for r in sq])
+    dth = np.abs(np.angle(np.exp(1j * (o[:, 2] - tr[:, 2]))))
+    assert dth.max() > math.radians(20.0)  # it lags on the turns
+    assert dth[-1] < 1e-9 or dth.max() < math.pi  # and its heading error stays bounded
+    assert np.median(dth) < math.radians(1.0)
+
+
+def compose_n(u: np.ndarray, n: int) -> np.ndarray:
+    p = np.zeros(3)
+    for _ in range(n):
+        p = compose(p, u)
+    return p

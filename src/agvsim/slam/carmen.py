@@ -15,7 +15,19 @@ Kümmerle relations use). Understood messages:
   n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv ...`` -- carries
   its own geometry: beam ``k`` at ``start_angle + k * angular_res``.
 
-``PARAM``, ``RAWLASER1..4``, ``#`` comments, blank lines and other messages are skipped. A scan
+* ``RAWLASER1 type start_angle fov angular_res max_range accuracy remission_mode n r_1..r_n
+  n_rem rem_1..rem_m`` -- a laser with its geometry but no pose: read only when the log has
+  neither FLASER nor ROBOTLASER1 lines (otherwise it repeats their scans), its odometry pose
+  interpolated between the ``ODOM`` messages around it (held at the first or last one outside
+  them) and its mount pose from the ``robot_frontlaser_offset``, ``..._side_offset`` and
+  ``..._angular_offset`` parameters (0 when absent).
+* ``PARAM name value`` -- parameters; ``laser_front_laser_fov`` and
+  ``laser_front_laser_resolution`` (deg) give FLASER's geometry when they agree with its number
+  of beams (the first beam at ``-fov / 2``).
+
+A laser message with the same ``ipc_timestamp`` as the scan before it is the same scan logged
+twice (FLASER next to ROBOTLASER1) and is skipped. ``RAWLASER2..4``, ``#`` comments, blank
+lines and other messages are skipped. A scan
 is an :class:`agvsim.scan.LaserScan` in the laser frame: its mount pose is
 ``T_robot_laser = T_odom_robot^-1 * T_odom_laser``, its ``odom_pose`` the robot's pose. A
 malformed line raises :class:`CarmenFormatError` naming the file, line number, message and
@@ -168,26 +180,74 @@ def _is_float(text: str) -> bool:
     return True
 
 
-def _survey(path: Path) -> tuple[int, float]:
-    """Number of laser messages and the largest FLASER reading of the log (the sensor's
-    no-return value); lines it cannot read are left for the main pass to report, and so is
-    a truncated end."""
-    count, best = 0, 0.0
+@dataclass
+class _Survey:
+    """What one pass over the log found: laser messages by kind, the largest FLASER reading
+    (the sensor's no-return value) and the ``PARAM`` values that are numbers."""
+
+    counts: dict[str, int]
+    flaser_max_m: float
+    params: dict[str, float]
+
+    @property
+    def raw_only(self) -> bool:
+        """The log's scans are RAWLASER1 messages (no FLASER, no ROBOTLASER1)."""
+        return not self.counts.get("FLASER") and not self.counts.get("ROBOTLASER1")
+
+    @property
+    def count(self) -> int:
+        if self.raw_only:
+            return self.counts.get("RAWLASER1", 0)
+        return self.counts.get("FLASER", 0) + self.counts.get("ROBOTLASER1", 0)
+
+    def flaser_geometry(self, n_beams: int) -> tuple[float, float]:
+        """(first beam angle, step) in radians of an ``n_beams`` FLASER scan."""
+        fov = self.params.get("laser_front_laser_fov")
+        res = self.params.get("laser_front_laser_resolution")
+        if fov and res and fov > 0 and res > 0:
+            k = fov / res
+            if abs(k - n_beams) < 1e-6 or abs(k + 1 - n_beams) < 1e-6:
+                return -0.5 * math.radians(fov), math.radians(res)
+        return -0.5 * math.pi, _flaser_step(n_beams)
+
+    def raw_mount(self) -> NDArray[np.float64]:
+        p = self.params
+        return np.array(
+            [
+                p.get("robot_frontlaser_offset", 0.0),
+                p.get("robot_frontlaser_side_offset", 0.0),
+                p.get("robot_frontlaser_angular_offset", 0.0),
+            ]
+        )
+
+
+_LASERS = ("FLASER", "ROBOTLASER1", "RAWLASER1")
+
+
+def _survey(path: Path) -> _Survey:
+    """One pass over the log (:class:`_Survey`); lines it cannot read are left for the main
+    pass to report, and so is a truncated end."""
+    out = _Survey({}, 0.0, {})
     try:
         for line in _survey_lines(path):
-            if line.startswith("FLASER"):
-                count += 1
+            kind = line.split(None, 1)[0] if line.strip() else ""
+            if kind in _LASERS:
+                out.counts[kind] = out.counts.get(kind, 0) + 1
+            if kind == "FLASER":
                 parts = line.split()
                 try:
                     n = int(parts[1])
-                    best = max(best, max(map(float, parts[2 : 2 + n]), default=0.0))
+                    best = max(map(float, parts[2 : 2 + n]), default=0.0)
+                    out.flaser_max_m = max(out.flaser_max_m, best)
                 except (ValueError, IndexError):
                     continue
-            elif line.startswith("ROBOTLASER1"):
-                count += 1
+            elif kind == "PARAM":
+                parts = line.split()
+                if len(parts) >= 3 and _is_float(parts[2]) and math.isfinite(float(parts[2])):
+                    out.params[parts[1]] = float(parts[2])
     except CarmenTruncated:
         pass
-    return count, best
+    return out
 
 
 def _survey_lines(path: Path) -> Iterable[str]:
@@ -206,16 +266,19 @@ def _parse_odom(f: _Line) -> OdomRecord:
     return OdomRecord(f.timestamp(), np.array([x, y, th]), float(tv), float(rv))
 
 
-def _parse_flaser(f: _Line, max_range_m: float) -> LaserScan:
+def _parse_flaser(f: _Line, max_range_m: float, survey: _Survey | None = None) -> LaserScan:
     n = f.count("num_readings")
     ranges = f.floats(n, f"{n} range readings")
     laser = f.floats(3, "laser pose x y theta")
     robot = f.floats(3, "odometry pose x y theta")
     stamp = f.timestamp()
+    start, step = (
+        survey.flaser_geometry(n) if survey is not None else (-0.5 * math.pi, _flaser_step(n))
+    )
     return LaserScan(
         stamp,
-        -0.5 * math.pi,
-        _flaser_step(n),
+        start,
+        step,
         0.0,
         max_range_m,
         _no_return(ranges, max_range_m),
@@ -224,7 +287,8 @@ def _parse_flaser(f: _Line, max_range_m: float) -> LaserScan:
     )
 
 
-def _parse_robotlaser(f: _Line) -> LaserScan:
+def _parse_laser_geometry(f: _Line) -> tuple[float, float, float, NDArray[np.float64]]:
+    """start angle, step, max range and the ranges of a ROBOTLASER1 / RAWLASER1 message."""
     _, start, fov, res, max_range = f.floats(5, "laser_type start_angle fov angular_res max_range")
     f.floats(2, "accuracy remission_mode")
     if max_range <= 0 or res == 0:
@@ -232,15 +296,38 @@ def _parse_robotlaser(f: _Line) -> LaserScan:
     n = f.count("num_readings")
     ranges = f.floats(n, f"{n} range readings")
     f.floats(f.count("num_remissions"), "remissions")
+    return float(start), float(res), float(max_range), ranges
+
+
+def _parse_rawlaser(f: _Line, odom: NDArray[np.float64], mount: NDArray[np.float64]) -> LaserScan:
+    start, res, max_range, ranges = _parse_laser_geometry(f)
+    stamp = f.timestamp()
+    return LaserScan(
+        stamp, start, res, 0.0, max_range, _no_return(ranges, max_range), mount.copy(), odom
+    )
+
+
+def _interpolate(a: OdomRecord, b: OdomRecord, t: float) -> NDArray[np.float64]:
+    """The odometry pose at ``t`` between ``a`` and ``b`` (linear, heading the short way);
+    held at the nearer one outside them."""
+    span = b.stamp_s - a.stamp_s
+    w = 0.0 if span <= 0 else min(max((t - a.stamp_s) / span, 0.0), 1.0)
+    out = a.pose + w * (b.pose - a.pose)
+    out[2] = wrap_scalar(a.pose[2] + w * wrap_scalar(b.pose[2] - a.pose[2]))
+    return out
+
+
+def _parse_robotlaser(f: _Line) -> LaserScan:
+    start, res, max_range, ranges = _parse_laser_geometry(f)
     laser = f.floats(3, "laser pose x y theta")
     robot = f.floats(3, "robot pose x y theta")
     stamp = f.timestamp()
     return LaserScan(
         stamp,
-        float(start),
-        float(res),
+        start,
+        res,
         0.0,
-        float(max_range),
+        max_range,
         _no_return(ranges, max_range),
         _relative(robot, laser),
         robot,
@@ -248,7 +335,10 @@ def _parse_robotlaser(f: _Line) -> LaserScan:
 
 
 def read_carmen(
-    path: str | Path, max_range_m: float | None = None, with_odom: bool = False
+    path: str | Path,
+    max_range_m: float | None = None,
+    with_odom: bool = False,
+    survey: _Survey | None = None,
 ) -> Iterator[LaserScan | OdomRecord]:
     """Yield the scans (and, with ``with_odom``, the ``ODOM`` messages) of a CARMEN log in order.
 
@@ -260,23 +350,48 @@ def read_carmen(
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"CARMEN log not found: {p}")
-    flaser_max = max_range_m
+    info = survey if survey is not None else _survey(p)
+    flaser_max = max_range_m if max_range_m is not None else info.flaser_max_m
+    mount = info.raw_mount()
+    last_stamp = math.nan
+    odoms: list[OdomRecord] = []  # the last ODOM (and the one before) for RAWLASER1
+    waiting: list[_Line] = []  # RAWLASER1 lines after the last ODOM
     for line_no, line in _lines(p):
         parts = line.split()
         if not parts or parts[0].startswith("#"):
             continue
         kind = parts[0]
         f = _Line(parts, str(p), line_no)
-        if kind == "FLASER":
-            if flaser_max is None:
-                flaser_max = _survey(p)[1]
-            yield _parse_flaser(f, flaser_max)
+        scan: LaserScan | None = None
+        if kind == "FLASER" and not info.raw_only:
+            scan = _parse_flaser(f, flaser_max, info)
         elif kind == "ROBOTLASER1":
-            yield _parse_robotlaser(f)
+            scan = _parse_robotlaser(f)
+        elif kind == "RAWLASER1" and info.raw_only:
+            waiting.append(f)  # parsed when the ODOM after it comes (errors name its line)
+            continue
         elif kind == "ODOM":
             odom = _parse_odom(f)
+            odoms = [*odoms[-1:], odom]
+            for g in waiting:  # the raw scans before this ODOM, interpolated
+                t = g.timestamp()
+                g.pos = 1
+                raw = _parse_rawlaser(g, _interpolate(odoms[0], odom, t), mount)
+                if raw.stamp_s != last_stamp:
+                    last_stamp = raw.stamp_s
+                    yield raw
+            waiting = []
             if with_odom:
                 yield odom
+        if scan is not None and scan.stamp_s != last_stamp:
+            last_stamp = scan.stamp_s
+            yield scan
+    for g in waiting:  # after the last ODOM: held at it
+        pose = odoms[-1].pose.copy() if odoms else np.zeros(3)
+        raw = _parse_rawlaser(g, pose, mount)
+        if raw.stamp_s != last_stamp:
+            last_stamp = raw.stamp_s
+            yield raw
 
 
 class CarmenLog:
@@ -288,7 +403,8 @@ class CarmenLog:
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(f"CARMEN log not found: {self.path}")
-        self._count, self.flaser_max_range_m = _survey(self.path)
+        self._survey = _survey(self.path)
+        self._count, self.flaser_max_range_m = self._survey.count, self._survey.flaser_max_m
         self.truncated_after_line: int | None = None
 
     def __len__(self) -> int:
@@ -296,7 +412,7 @@ class CarmenLog:
 
     def __iter__(self) -> Iterator[LaserScan]:
         try:
-            for rec in read_carmen(self.path, self.flaser_max_range_m or None):
+            for rec in read_carmen(self.path, self.flaser_max_range_m or None, survey=self._survey):
                 if isinstance(rec, LaserScan):
                     yield rec
         except CarmenTruncated as cut:

@@ -72,8 +72,16 @@ class TrackingConfig:
     odom_floor_m_per_m: float = 0.01
     odom_floor_rad_per_rad: float = 0.01
     odom_floor_rad_per_m: float = math.radians(0.25)
-    lost_score: float = 0.35  # below it after the wide search for lost_scans scans: relocalise
+    # ceilings of a match's learnt noise (std): a scan that fits is not off by more; a larger
+    # learnt spread is odometry's error that does not build up (.fusion.OdometryFusion)
+    match_ceiling_m: float = 0.05
+    match_ceiling_rad: float = math.radians(1.0)
+    lost_score: float = 0.35  # below it after the wide search: lost (relocalise_scans, lost_scans)
     lost_scans: int = 3
+    # a scan under lost_score even after the wide search is looked for over
+    # +-relocalise_window_m and every heading in the submap from this many such scans in a row
+    # (1: at once; between sparse scans the robot moves and turns far)
+    relocalise_scans: int = 1
     relocalise_window_m: float = 2.0  # relocalisation search: +- this, all headings
     global_min_score: float = 0.7  # global relocalisation (all submaps) accepted from this score
     global_points: int = 48  # scan points the global search places (then all are refined)
@@ -245,7 +253,14 @@ class Tracker:
         self.submaps: list[Submap] = []
         floors = (cfg.odom_floor_m_per_m, cfg.odom_floor_rad_per_rad, cfg.odom_floor_rad_per_m)
         self.fusion = (
-            OdometryFusion(cfg.fusion_window, cfg.fusion_lag, floors) if cfg.fuse_odometry else None
+            OdometryFusion(
+                cfg.fusion_window,
+                cfg.fusion_lag,
+                floors,
+                (cfg.match_ceiling_m, cfg.match_ceiling_rad),
+            )
+            if cfg.fuse_odometry
+            else None
         )
         self.check = OdometryCheck(cfg.doubt)
         self.doubted = False  # the last scan's match refuted odometry
@@ -267,7 +282,9 @@ class Tracker:
             return [raw.copy()]
         u = between(self.odom_raw, raw)
         u[:2] *= 1.0 if self.fusion is None else self.fusion.scale()
-        self.odom_now = compose(self.odom, u)
+        # an unchanged odometry stays exactly unchanged (composing a zero increment can round
+        # the heading, and the odometry check tells a frozen odometry by an exact zero)
+        self.odom_now = self.odom.copy() if not u.any() else compose(self.odom, u)
         return self.check.candidates(self.pose, self.odom, self.odom_now)
 
     def match(self, points: F64, guesses: list[F64], ang_step: float) -> tuple[F64, float]:
@@ -333,7 +350,7 @@ class Tracker:
                     0.0,
                 )
         self._lost = self._lost + 1 if score < cfg.lost_score else 0
-        if self._lost >= cfg.lost_scans:
+        if self._lost >= cfg.relocalise_scans:
             pose, score = self._relocalise(s, points, guess, ang_step, pose, score)
         # a poor fit even after the wide search: kidnapped, or entering unmapped space
         self.poor = self.poor + 1 if score < cfg.retry_score else 0

@@ -49,13 +49,26 @@ class OdometryFusion:
     the noises are learnt from the scaled increments.
 
     Until it is :meth:`ready`, the pose is odometry's alone (and :class:`~.graph_slam.GraphSlam`
-    processes those first scans again with the learnt noises, :meth:`preset`)."""
+    processes those first scans again with the learnt noises, :meth:`preset`).
+
+    The two lags cannot tell the match's noise from an odometry error that does not build up
+    (odometry smoothed or lagging: off on every turn, right again after it): both are the same
+    at every lag, and all of it would be put on the match, so the fusion would trust that
+    odometry fully. A match that fits is not off by more than about a cell or a degree, so
+    the learnt match spread is capped at ``match_ceilings`` (std) and the rest is odometry's
+    (:meth:`estimate`)."""
 
     def __init__(
-        self, window: int, lag: int, floors: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self,
+        window: int,
+        lag: int,
+        floors: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        match_ceilings: tuple[float, float] = (math.inf, math.inf),
     ) -> None:
         self.window, self.lag = window, lag
         self.floors = floors  # std: m per m, rad per rad, rad per m (TrackingConfig.odom_floor_*)
+        # std: m, rad (TrackingConfig.match_ceiling_*): see estimate()
+        self.match_ceilings = match_ceilings
         self._preset = False
         self.matches: list[F64] = []
         self.odoms: list[F64] = []
@@ -195,9 +208,14 @@ class OdometryFusion:
         v1 = _spread(m, o, 1, self._scale)
         vl = _spread(m, o, lag, self._scale)
         out = []
-        for a, b in zip(v1, vl, strict=True):
+        for a, b, cap in zip(v1, vl, self.match_ceilings, strict=True):
             s_o = max(b - a, 0.0) / (lag - 1)
             s_m = max(a - s_o, 1e-12) / 2.0
+            if s_m > cap**2:
+                # more than a match can be off: odometry's error that does not build up
+                # (smoothed or lagging odometry is off on every turn and right again after
+                # it); it is odometry's per-scan error all the same
+                s_o, s_m = s_o + 2.0 * (s_m - cap**2), cap**2
             out.append((s_o, s_m))
         (so_t, sm_t), (so_r, sm_r) = out
         return so_t, sm_t, so_r / (so_r + sm_r), so_r

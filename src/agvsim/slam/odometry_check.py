@@ -72,6 +72,7 @@ class OdometryCheck:
         self.doubted = 0  # scans in a row whose match disagreed with odometry
         self.n_doubted = 0  # in all
         self.stall = False  # odometry did not change while the robot was moving
+        self.frozen = False  # odometry did not change at all since the scan before
         self.last_pose: F64 | None = None
         self.last_motion: F64 | None = None  # tracked motion of the last scan
         self._moving = False
@@ -83,7 +84,8 @@ class OdometryCheck:
         out = [compose(prev_pose, u)]
         if not self.cfg.enabled:
             return out
-        self.stall = bool(np.all(u == 0.0)) and self._moving
+        self.frozen = bool(np.all(u == 0.0))
+        self.stall = self.frozen and self._moving
         if self.stall and self.last_motion is not None:
             out.append(compose(prev_pose, self.last_motion))
         if self.ref_pose is not None and self.ref_odom is not None and self.since_ref > 1:
@@ -126,11 +128,11 @@ class OdometryCheck:
             return False
         if self.stall:
             return True
+        mv = match_var or (0.0, 0.0)
         if score_match - score_guess < self.cfg.margin:
             return False
         d = between(guess, match)
         s = self.spread(odom_var) or (0.0, 0.0)
-        mv = match_var or (0.0, 0.0)
         k = self.cfg.gate_sigmas
         gate_m = max(self.cfg.min_gate_m, k * math.sqrt(s[0] ** 2 + mv[0]))
         gate_rad = max(self.cfg.min_gate_rad, k * math.sqrt(s[1] ** 2 + mv[1]))
@@ -148,7 +150,10 @@ class OdometryCheck:
             )
         self.last_pose = pose.copy()
         if doubted:
-            self.doubted += 1
+            # a frozen odometry is right again once it moves (it jumps by what it missed,
+            # however long it froze): only scans where it moved wrongly count towards
+            # max_doubt_scans (a slip for good)
+            self.doubted += 0 if self.frozen else 1
             self.n_doubted += 1
         else:
             self.doubted = 0
