@@ -57,3 +57,26 @@ def test_restored_when_the_run_raises():
         pass
     assert gc.get_threshold() == before
     assert gc.get_freeze_count() == 0
+
+
+def test_overlapping_runs_in_threads_restore_the_setting_when_the_last_leaves():
+    import threading
+
+    before = gc.get_threshold()
+    inside, leave_first = threading.Event(), threading.Event()
+
+    def first() -> None:
+        with long_run_gc(gen0=20_000):
+            inside.set()
+            leave_first.wait(10)
+
+    t = threading.Thread(target=first)
+    t.start()
+    assert inside.wait(10)
+    with long_run_gc(gen0=5_000):  # the second run starts while the first is inside ...
+        leave_first.set()
+        t.join(10)  # ... and the first one leaves before it
+        assert gc.get_threshold()[0] == max(20_000, before[0])  # still set for this run
+        assert gc.get_freeze_count() > 0
+    assert gc.get_threshold() == before
+    assert gc.get_freeze_count() == 0

@@ -21,24 +21,39 @@ tests, is left as it was. Results do not depend on when the collector runs.
 from __future__ import annotations
 
 import gc
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 GEN0_THRESHOLD = 10_000  # allocations between young collections (CPython's default: 700)
 
+# the collector is the process's: runs that overlap (nested, or in threads) share one setting,
+# made by the first to enter and undone by the last to leave
+_lock = threading.Lock()
+_depth = 0
+_saved: tuple[tuple[int, ...], bool] = ((), False)  # thresholds before, whether we froze
+
 
 @contextmanager
 def long_run_gc(gen0: int = GEN0_THRESHOLD) -> Iterator[None]:
     """While inside: the objects alive now frozen, young collections every ``gen0``
-    allocations (never more often than the current setting). Restored on exit; nesting is
-    harmless (the inner one changes nothing that the outer did not)."""
-    old = gc.get_threshold()
-    frozen_before = gc.get_freeze_count()
-    gc.freeze()
-    gc.set_threshold(max(gen0, old[0]), *old[1:])
+    allocations (never more often than the current setting). Restored when the last of the
+    overlapping runs leaves; an inner or concurrent one changes nothing."""
+    global _depth, _saved
+    with _lock:
+        if _depth == 0:
+            old = gc.get_threshold()
+            _saved = (old, gc.get_freeze_count() == 0)
+            gc.freeze()
+            gc.set_threshold(max(gen0, old[0]), *old[1:])
+        _depth += 1
     try:
         yield
     finally:
-        gc.set_threshold(*old)
-        if frozen_before == 0:  # the outermost one thaws what it froze
-            gc.unfreeze()
+        with _lock:
+            _depth -= 1
+            if _depth == 0:
+                saved, thaw = _saved
+                gc.set_threshold(*saved)
+                if thaw:  # what we froze becomes collectable again
+                    gc.unfreeze()
