@@ -303,9 +303,9 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=60.0, help="simulated seconds")
     ap.add_argument("--cols", type=int, default=80, help="road nodes across")
     ap.add_argument("--rows", type=int, default=50, help="road nodes down")
-    # the 1,000 vehicles on the default layout deliver about 8.4 orders per vehicle and hour
-    # at most (measured: docs/master.md); at 20 (the former default) the queue grows without
-    # bound, and no master is at a steady state. 6 is about 70 % of that capacity.
+    # the 1,000 vehicles on the default layout deliver up to about 6 orders per vehicle and
+    # hour for the first 40 minutes, less once they charge (measured: docs/master.md); at 3
+    # the hour is at a steady state
     ap.add_argument(
         "--rate",
         type=float,

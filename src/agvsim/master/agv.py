@@ -55,9 +55,9 @@ class Agv:
     progress_seen: tuple[dict | None, tuple] | None = None
     # (decision node, held since, the node's table version, from when) when others had it
     blocked_at: tuple[str, float, int, float] | None = None
-    # when route nodes were granted and when it was seen to reach its last one (by index)
+    # when route nodes were granted (by route index), when it was seen at node ``reached``
     grant_t: dict[int, float] = field(default_factory=dict)
-    reach_t: dict[int, float] = field(default_factory=dict)
+    reached_s: float | None = None
     turn_radius_m: float = 0.0  # car-like: its minimum turning radius (0: turns on the spot)
     road: RoadGraph | None = None  # its routing graph (Master.graph), once known
     _battery_of: dict | None = field(default=None, repr=False, compare=False)

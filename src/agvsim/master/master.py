@@ -175,10 +175,6 @@ class Master:
     def static_time(self, agv: Agv, a: str, b: str) -> float:
         return self.graph(agv).times_to(b).get(a, INF)
 
-    @staticmethod
-    def _ready(agv: Agv) -> bool:
-        return agv.ready  # home, type and a state known (set by ``receive``)
-
     def chargers(self, agv: Agv) -> list[str]:
         """The nodes where ``agv`` can charge (a node offering ``startCharging``)."""
         got = self._chargers.get(agv.vehicle_type)
@@ -260,7 +256,7 @@ class Master:
             agv.orders_sent += 1
             agv.order_id = f"{agv.serial}-{agv.orders_sent:05d}"
             agv.update_id, agv.granted, agv.sent, agv.reached = 0, 0, -1, 0
-            agv.grant_t, agv.reach_t = {0: t_s}, {}
+            agv.grant_t, agv.reached_s = {0: t_s}, None
             agv.order_done = False
         else:  # the steps after the decision point are new: so are their grants
             agv.grant_t = {i: t for i, t in agv.grant_t.items() if i <= g}
@@ -386,8 +382,8 @@ class Master:
         an edge it drove through without stopping is a sample of its pace (agvsim.master.
         pace: its end granted ``GRANT_LEAD_S`` before it reached the start, no action and no
         planned wait at the start)."""
-        since = agv.reach_t.get(before)
-        agv.reach_t = {now: t_s}
+        since = agv.reached_s  # when it was seen at ``before``
+        agv.reached_s = t_s
         if since is None or now != before + 1:
             return
         granted = agv.grant_t.get(now)
@@ -456,7 +452,7 @@ class Master:
         while self.upcoming and self.upcoming[0].created_s <= t_s:
             self.pending.append(self.upcoming.pop(0))
         for agv in self.agvs.values():
-            if (not agv.order_done or agv.serial in self._touched) and self._ready(agv):
+            if (not agv.order_done or agv.serial in self._touched) and agv.ready:
                 self._progress(agv, t_s, out)
         self._charging(t_s, out)
         blocking = self._blocking()
@@ -469,7 +465,7 @@ class Master:
                     self.metrics.retimed += 1
         self._dispatch(t_s)
         for agv in self.agvs.values():
-            if agv.order_done and not agv.changed or agv.broken or not self._ready(agv):
+            if agv.order_done and not agv.changed or agv.broken or not agv.ready:
                 continue
             self._grant(agv)
             if agv.granted > agv.sent or agv.changed:
@@ -514,7 +510,7 @@ class Master:
         not re-planned for that in the last ``late_s``. Re-planning it moves its pending
         visits after everyone else's: vehicles queued behind them go first (the planned
         order stays consistent, so the dependency graph stays acyclic)."""
-        if agv.order_done or agv.broken or agv.state is None or not self._ready(agv):
+        if agv.order_done or agv.broken or agv.state is None or not agv.ready:
             return False
         if agv.granted + 1 >= len(agv.route) or t_s - agv.retimed_s < self.cfg.late_s:
             return False
@@ -540,7 +536,7 @@ class Master:
     def _charging(self, t_s: float, out: list[Message]) -> None:
         low, full = self.cfg.charging.low_pct, self.cfg.charging.full_pct
         for agv in self.agvs.values():
-            if agv.job not in ("charging", "idle") or agv.broken or not self._ready(agv):
+            if agv.job not in ("charging", "idle") or agv.broken or not agv.ready:
                 continue
             if agv.job == "charging" and agv.charging and agv.battery_pct >= full:
                 if not agv.stop_charging_sent:
@@ -566,7 +562,7 @@ class Master:
             for a in self.agvs.values()
             if a.job in ("idle", "home")
             and not a.broken
-            and self._ready(a)
+            and a.ready
             and a.battery_pct >= low
             and not a.charging
         ]
