@@ -291,9 +291,9 @@ class Tracker:
         """Correlative search then Gauss-Newton against the older active submap, around the
         prediction the scan fits best, in windows that grow with odometry's uncertainty. A poor
         match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
-        wide window; one lost for ``lost_scans`` scans is relocalised in the submap. A match
-        that refutes odometry is kept as it is; otherwise it is fused with the prediction.
-        ``ang_step`` (rad) is the angular search step."""
+        wide window; one still under ``lost_score`` for ``relocalise_scans`` scans is relocalised
+        in the submap. A match that refutes odometry is kept as it is; otherwise it is fused
+        with the prediction. ``ang_step`` (rad) is the angular search step."""
         guess = guesses[0]
         self.doubted = self.odom_suspect = False
         if not self.active:

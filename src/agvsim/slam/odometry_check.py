@@ -128,11 +128,11 @@ class OdometryCheck:
             return False
         if self.stall:
             return True
-        mv = match_var or (0.0, 0.0)
         if score_match - score_guess < self.cfg.margin:
             return False
         d = between(guess, match)
         s = self.spread(odom_var) or (0.0, 0.0)
+        mv = match_var or (0.0, 0.0)
         k = self.cfg.gate_sigmas
         gate_m = max(self.cfg.min_gate_m, k * math.sqrt(s[0] ** 2 + mv[0]))
         gate_rad = max(self.cfg.min_gate_rad, k * math.sqrt(s[1] ** 2 + mv[1]))
