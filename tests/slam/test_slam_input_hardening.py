@@ -38,6 +38,36 @@ def carmen_text(n: int = 60) -> str:
     return "".join(lines)
 
 
+def carmen_newer_text(n: int = 12, raw_only: bool = True) -> str:
+    """The same corridor in the newer records: PARAM lines, ODOM, and RAWLASER1 scans (no
+    FLASER: their odometry comes from the ODOM lines, the mount from PARAM) or ROBOTLASER1
+    scans logged beside a FLASER copy of the same scan (read once)."""
+    angles = np.radians(np.arange(-90.0, 90.5, 0.5))  # 361 beams, 0.5 deg
+    s = np.sin(angles)
+    with np.errstate(divide="ignore"):
+        r = np.minimum(np.where(np.abs(s) > 1e-6, 1.0 / np.abs(s), 30.0), 30.0)
+    vals = " ".join(f"{v:.3f}" for v in r)
+    lines = [
+        "PARAM robot_frontlaser_offset 0.2 nohost 0\n",
+        "PARAM laser_front_laser_fov 180 nohost 0\n",
+        "PARAM laser_front_laser_resolution 0.5 nohost 0\n",
+    ]
+    for k in range(n):
+        x, t = 0.05 * k, 100.0 + 0.2 * k
+        lines.append(f"ODOM {x} 0 0 0.25 0 0 {t} host {t}\n")
+        if raw_only:
+            lines.append(
+                f"RAWLASER1 0 -1.5708 3.1416 0.00873 30.0 0.01 0 361 {vals} 0 {t} host {t}\n"
+            )
+        else:
+            lines.append(
+                f"ROBOTLASER1 0 -1.5708 3.1416 0.00873 30.0 0.01 0 361 {vals} 0 "
+                f"{x + 0.2} 0 0 {x} 0 0 0.25 0 0.5 0.2 0.1 {t} host {t}\n"
+            )
+            lines.append(f"FLASER 361 {vals} {x + 0.2} 0 0 {x} 0 0 {t} host {t}\n")
+    return "".join(lines)
+
+
 def write_gz(path: Path, text: str) -> Path:
     with gzip.open(path, "wt", encoding="ascii") as f:
         f.write(text)
@@ -167,6 +197,33 @@ def test_fuzzed_carmen_log_gives_a_result_or_a_clear_error(
         path.write_bytes(mutate(z, rng) if rng.random() < 0.5 else z)
     else:
         path.write_bytes(raw)
+    try:
+        res = run_offline(path, tmp_path / "out")
+    except (CarmenFormatError, ValueError) as exc:
+        assert path.name in str(exc)
+    else:
+        assert res.n_scans >= 1 and res.trajectory_path.is_file()
+
+
+@pytest.mark.parametrize("raw_only", [True, False])
+def test_the_newer_records_are_read(tmp_path: Path, raw_only: bool) -> None:
+    path = tmp_path / "newer.clf"
+    path.write_text(carmen_newer_text(raw_only=raw_only))
+    scans = list(CarmenLog(path))
+    assert len(scans) == 12  # a scan logged twice (ROBOTLASER1 and FLASER) counts once
+    assert len(scans[0].ranges) == 361
+    np.testing.assert_allclose(scans[5].odom_pose, [0.25, 0.0, 0.0], atol=1e-9)
+
+
+@FUZZ
+@given(seed=st.integers(0, 2**32 - 1), raw_only=st.booleans())
+def test_fuzzed_newer_records_give_a_result_or_a_clear_error(
+    tmp_path: Path, seed: int, raw_only: bool
+) -> None:
+    """PARAM, RAWLASER1 and ROBOTLASER1 lines, mutated: a map or an error naming the file."""
+    rng = np.random.default_rng(seed)
+    path = tmp_path / "fuzz.clf"
+    path.write_bytes(mutate(carmen_newer_text(raw_only=raw_only).encode(), rng))
     try:
         res = run_offline(path, tmp_path / "out")
     except (CarmenFormatError, ValueError) as exc:
