@@ -205,11 +205,20 @@ def test_look_alike_closures_do_not_confirm_each_other() -> None:
     assert det.verify(closure(2 + cfg.confirm_gap - 1, *later, submap=1)) == []
     # nor does the same submap matched again further on
     assert det.verify(closure(2 + cfg.confirm_gap + 1, *later, submap=0)) == []
-    # a fit far from the graph's estimate scoring under jump_min_score is dropped outright:
-    # a consistent strong one later finds nothing to confirm
+    # two fits far from the graph's estimate both scoring under jump_min_score do not confirm
+    # each other, however consistent ...
     det.clear_pending()
-    assert det.verify(closure(30, *jump, score=cfg.jump_min_score - 0.01)) == []
-    assert det.verify(closure(30 + cfg.confirm_gap, *later, submap=1)) == []
+    weak = cfg.jump_min_score - 0.01
+    assert det.verify(closure(30, *jump, score=weak)) == []
+    assert det.verify(closure(30 + cfg.confirm_gap, *later, submap=1, score=weak)) == []
+    # ... a consistent strong one confirms a weak one waiting (the first of the two)
+    both = det.verify(closure(30 + cfg.confirm_gap + 1, *later, submap=2))
+    assert [c.node for c in both] == [30, 30 + cfg.confirm_gap + 1]
+    # and a weak one is confirmed by a strong one waiting
+    det.clear_pending()
+    assert det.verify(closure(60, *jump)) == []
+    both = det.verify(closure(60 + cfg.confirm_gap, *later, submap=1, score=weak))
+    assert [c.node for c in both] == [60, 60 + cfg.confirm_gap]
 
 
 @pytest.mark.slow

@@ -165,3 +165,39 @@ def test_a_freeze_longer_than_max_doubt_scans_keeps_its_reference() -> None:
     jumped = frozen + 30 * step  # odometry moves again: 90 deg in one message
     cands = chk.candidates(pose, frozen, jumped)
     np.testing.assert_allclose(cands[-1], [1.0, 2.0, math.radians(93.0)], atol=1e-12)
+
+
+def test_a_poor_fit_is_searched_widely_around_every_prediction() -> None:
+    """A scan whose far half lies outside the submap (new space) fits poorly everywhere: 0.42
+    at the truth. Of the two predictions, the one 70 deg off fits (marginally) better at its
+    centre than the one 30 deg off, but only the latter's wide window (+-40 deg) holds the
+    truth: the wide search runs around both and finds it within a cell (it searched around
+    the former alone, and ended far off). Relocalisation is off to test the wide search."""
+    from agvsim.slam import scan_matching as sm
+    from agvsim.slam.frontend import Tracker
+    from agvsim.slam.se2 import compose
+
+    cfg = TrackingConfig(fuse_odometry=False, relocalise_scans=10**6)
+    tracker = Tracker(cfg)
+    slam = GraphSlam(30.0)
+    for node in range(20):
+        pose = np.array([1.5 + 0.2 * node, 1.5, 0.0])
+        _, ends, hits = slam.scan_points(cast(pose), ANGLES)
+        world = compose(pose, np.column_stack([ends, np.zeros(len(ends))]))[:, :2]
+        tracker.insert(node, pose, pose[:2], world, hits)
+    truth = np.array([3.0, 1.6, 0.05])
+    pts, _, _ = slam.scan_points(cast(truth), ANGLES)
+    unseen = np.column_stack([np.full(len(pts), 25.0), np.linspace(-5.0, 5.0, len(pts))])
+    pts = np.vstack([pts, unseen])
+    near = truth + [0.0, 0.0, math.radians(30.0)]
+    far = truth + [0.0, 0.0, math.radians(-70.0)]
+    s = tracker.active[0]
+
+    def fit(pose: np.ndarray) -> float:
+        return float(sm.score_pose(s.likelihood, s.ox, s.oy, cfg.resolution_m, pts, pose))
+
+    assert fit(truth) < cfg.retry_score and fit(far) > fit(near)
+    pose, score = tracker.match(pts, [near, far], slam.angular_step(pts[: len(ANGLES)]))
+    assert np.hypot(*(pose[:2] - truth[:2])) < cfg.resolution_m
+    assert abs(wrap_angle(pose[2] - truth[2])) < math.radians(1.0)
+    assert score >= fit(truth)

@@ -84,3 +84,31 @@ def test_kidnapped_robot_is_found_again_and_slam_resumes() -> None:
     lost, _, _ = kidnapped_run(SlamConfig(global_relocalisation=False))
     err_lost = np.hypot(*(lost.trajectory()[1][:, :2] - truth[:, :2]).T)
     assert lost.n_global_relocalised == 0 and err_lost[after].mean() > 1.0
+
+
+def test_a_relocalisation_must_turn_as_odometry_turned_unless_it_stood_still() -> None:
+    """Hand-worked: the last scan that fitted was at heading 0.3 rad with odometry at
+    heading 1.0; two poor scans later odometry is at heading 1.5 (turned 0.5 rad while
+    driving 0.6 m), so odometry puts the robot at 0.8 rad. With no learnt noise the gate is
+    ``doubt.min_gate_rad`` (3 deg): a place found at 0.8 + 2 deg passes, one 180 deg off
+    (a look-alike half of a symmetric building) or 10 deg off does not. Had odometry
+    reported standing still at one of those scans (a robot carried off), any heading
+    passes."""
+    slam = GraphSlam(30.0)
+    gate = slam.cfg.tracking.doubt.min_gate_rad
+    slam._fit = (np.array([4.0, 2.0, 0.3]), np.array([10.0, 5.0, 1.0]))
+    slam._since_fit = 2
+    slam._odom = compose(np.array([10.0, 5.0, 1.0]), np.array([0.6, 0.0, 0.5]))
+    assert slam.tracker.odometry_variance() is None  # nothing learnt: the floor
+    assert slam._heading_plausible(0.8 + math.radians(2.0))
+    assert slam._heading_plausible(0.8 - 0.9 * gate)
+    assert not slam._heading_plausible(0.8 + math.pi)
+    assert not slam._heading_plausible(0.8 + math.radians(10.0))
+    slam._froze = True
+    assert slam._heading_plausible(0.8 + math.pi)
+    # standing still: an increment under doubt.moving_m and doubt.moving_rad
+    slam.tracker.odom = np.array([1.0, 1.0, 0.0])
+    slam._odom = np.array([1.005, 1.0, 0.001])
+    assert slam._odometry_still()
+    slam._odom = np.array([1.05, 1.0, 0.0])
+    assert not slam._odometry_still()

@@ -291,9 +291,11 @@ class Tracker:
         """Correlative search then Gauss-Newton against the older active submap, around the
         prediction the scan fits best, in windows that grow with odometry's uncertainty. A poor
         match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
-        wide window; one still under ``lost_score`` for ``relocalise_scans`` scans is relocalised
-        in the submap. A match that refutes odometry is kept as it is; otherwise it is fused
-        with the prediction. ``ang_step`` (rad) is the angular search step."""
+        wide window around every prediction (where the scan fits poorly everywhere, the one it
+        fits best at its centre need not be the one whose window holds the pose); one still
+        under ``lost_score`` for ``relocalise_scans`` scans is relocalised in the submap. A
+        match that refutes odometry is kept as it is; otherwise it is fused with the
+        prediction. ``ang_step`` (rad) is the angular search step."""
         guess = guesses[0]
         self.doubted = self.odom_suspect = False
         if not self.active:
@@ -322,19 +324,23 @@ class Tracker:
             cfg.prior_ang_weight,
         )
         if score < cfg.retry_score:
-            wide, wide_score = sm.correlative_search(
-                s.likelihood,
-                s.ox,
-                s.oy,
-                res,
-                points,
-                guess,
-                max(cfg.wide_window_m, win_m),
-                max(cfg.wide_window_rad, win_rad),
-                2.0 * ang_step,
-                0.0,
-                0.0,
-            )
+            wide, wide_score = guess, -1.0
+            for g in guesses:
+                w, w_score = sm.correlative_search(
+                    s.likelihood,
+                    s.ox,
+                    s.oy,
+                    res,
+                    points,
+                    g,
+                    max(cfg.wide_window_m, win_m),
+                    max(cfg.wide_window_rad, win_rad),
+                    2.0 * ang_step,
+                    0.0,
+                    0.0,
+                )
+                if w_score > wide_score:
+                    wide, wide_score = w, w_score
             if wide_score > score:
                 pose, score = sm.correlative_search(
                     s.likelihood,

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from agvsim.angles import wrap_scalar
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.frontend import MotionFilter, Submap, Tracker, TrackingConfig
 from agvsim.slam.loop_closure import (
@@ -174,6 +175,11 @@ class GraphSlam:
         self._scan_at_keyframe = 0
         self._odom = np.zeros(3)  # odometry pose of the scan being processed
         self._odom_doubted = False  # a scan since the last keyframe refuted odometry
+        # the last scan that fitted (score at least tracking.retry_score): local pose and
+        # odometry, and the scans since (a global relocalisation is checked against them)
+        self._fit: tuple[F64, F64] | None = None
+        self._since_fit = 0
+        self._froze = False  # odometry reported standing still at one of those scans
         self._relocated: int | None = None  # submap a global relocalisation found the scan in
         self.n_global_relocalised = 0
 
@@ -223,6 +229,12 @@ class GraphSlam:
                 self.tracker.restart(pose)
                 self.motion.last_pose = None  # a keyframe here, tied to where it was found
                 self.n_global_relocalised += 1
+                self._fit = None  # found: odometry counts from here
+        if score >= self.cfg.tracking.retry_score or self._fit is None:
+            self._fit, self._since_fit, self._froze = (pose.copy(), self._odom.copy()), 0, False
+        else:
+            self._since_fit += 1
+            self._froze |= self._odometry_still()
         self.tracker.accept(pose, odom_pose)
         self._odom_doubted |= self.tracker.odom_suspect
         if not hold and self.motion.is_keyframe(pose, timestamp):
@@ -406,9 +418,38 @@ class GraphSlam:
         if (
             score < max(cfg.global_min_score, local_score + cfg.doubt.margin)
             or math.hypot(d[0], d[1]) <= cfg.relocalise_window_m
+            or not self._heading_plausible(pose[2])
         ):
             return None
         return pose, s.index
+
+    def _odometry_still(self) -> bool:
+        """Odometry's increment to this scan is under ``doubt.moving_m`` and
+        ``doubt.moving_rad`` (it reported standing still, up to its noise)."""
+        prev = self.tracker.odom
+        if prev is None:
+            return False
+        u, doubt = between(prev, self._odom), self.cfg.tracking.doubt
+        return bool(math.hypot(u[0], u[1]) < doubt.moving_m and abs(u[2]) < doubt.moving_rad)
+
+    def _heading_plausible(self, heading: float) -> bool:
+        """Whether a global relocalisation's heading (local frame) is one odometry allows:
+        within ``doubt.gate_sigmas`` of the heading odometry has turned since the last scan
+        that fitted (its learnt per-scan variance times the scans since, at least
+        ``doubt.min_gate_rad``), or odometry reported standing still at one of the scans since
+        (:meth:`_odometry_still`; a robot carried off: its wheels saw nothing of it, so any
+        heading). A building of
+        look-alike halves (corridors round a symmetric core) scores as well 180 deg off;
+        tracking that lost its place between sparse scans had odometry turning all along."""
+        if self._fit is None or self._froze:
+            return True
+        fit_pose, fit_odom = self._fit
+        moved = between(fit_odom, self._odom)
+        var = self.tracker.odometry_variance()
+        doubt = self.cfg.tracking.doubt
+        sigma = math.sqrt(max(self._since_fit, 1) * var[1]) if var is not None else 0.0
+        gate = max(doubt.min_gate_rad, doubt.gate_sigmas * sigma)
+        return abs(wrap_scalar(heading - fit_pose[2] - moved[2])) <= gate
 
     def relocation_closure(self, node: int, submap: int) -> list[LoopClosure]:
         """The edge that ties a keyframe found by :meth:`relocalise` to the submap it was

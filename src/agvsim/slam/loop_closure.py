@@ -21,8 +21,8 @@ A closure is *verified* when
 
 1. its score (mean likelihood of the scan's points in the submap) is at least ``min_score``, and
 2. the matched global pose ``g_i'`` agrees with the graph (``D = g_i^-1 g_i'`` within
-   ``agree_m`` and ``agree_rad``), or it scores at least ``jump_min_score`` and a recent
-   pending closure ``j`` is consistent with it: the two matched poses are placed as local
+   ``agree_m`` and ``agree_rad``), or a recent pending closure ``j`` is consistent with it
+   and one of the two scores at least ``jump_min_score``: the two matched poses are placed as local
    tracking placed the two keyframes, ``(g_j'^-1 g_i')^-1 (l_j^-1 l_i)`` within the same bounds
    (pairwise consistency), ``j`` lies ``confirm_gap`` keyframes or more back and was matched in
    another submap (neighbouring keyframes in one submap see the same walls and repeat the same
@@ -224,13 +224,16 @@ class LoopDetector:
         self._pending = [p for p in self._pending if closure.node - p.node <= cfg.pending_nodes]
         if self.agrees(between(closure.estimate, closure.matched)):
             return [closure]
-        if closure.score < cfg.jump_min_score:
-            return []  # a weak fit far from the graph's estimate: most likely a look-alike
+        # a weak fit far from the graph's estimate is most likely a look-alike: it waits, and
+        # is taken only with a consistent strong one (sparse scans build thinner submaps, where
+        # right closures score lower; their drifted graph needs them most)
+        strong = closure.score >= cfg.jump_min_score
         for p in self._pending:
             err = between(between(p.matched, closure.matched), between(p.local, closure.local))
             if (
                 closure.node - p.node >= cfg.confirm_gap
                 and closure.submap != p.submap
+                and (strong or p.score >= cfg.jump_min_score)
                 and self.agrees(err)
             ):
                 self._pending.remove(p)
