@@ -438,9 +438,9 @@ class GraphSlam:
         that fitted (its learnt per-scan variance times the scans since, at least
         ``doubt.min_gate_rad``), or odometry reported standing still at one of the scans since
         (:meth:`_odometry_still`; a robot carried off: its wheels saw nothing of it, so any
-        heading). A building of
-        look-alike halves (corridors round a symmetric core) scores as well 180 deg off;
-        tracking that lost its place between sparse scans had odometry turning all along."""
+        heading). A building of look-alike halves (corridors round a symmetric core) scores
+        as well 180 deg off; tracking that lost its place between sparse scans had odometry
+        turning all along."""
         if self._fit is None or self._froze:
             return True
         fit_pose, fit_odom = self._fit
