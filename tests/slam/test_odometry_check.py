@@ -171,8 +171,9 @@ def test_a_poor_fit_is_searched_widely_around_every_prediction() -> None:
     """A scan whose far half lies outside the submap (new space) fits poorly everywhere: 0.42
     at the truth. Of the two predictions, the one 70 deg off fits (marginally) better at its
     centre than the one 30 deg off, but only the latter's wide window (+-40 deg) holds the
-    truth: the wide search runs around both and finds it within a cell (it searched around
-    the former alone, and ended far off). Relocalisation is off to test the wide search."""
+    truth: the wide search runs around both and finds it within a cell, its fit beating the
+    other window's by more than the odometry check's margin (it searched around the former
+    alone, and ended far off). Relocalisation is off to test the wide search."""
     from agvsim.slam import scan_matching as sm
     from agvsim.slam.frontend import Tracker
     from agvsim.slam.se2 import compose

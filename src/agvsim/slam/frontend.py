@@ -292,7 +292,8 @@ class Tracker:
         prediction the scan fits best, in windows that grow with odometry's uncertainty. A poor
         match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
         wide window around every prediction (where the scan fits poorly everywhere, the one it
-        fits best at its centre need not be the one whose window holds the pose); one still
+        fits best at its centre need not be the one whose window holds the pose; another's
+        result must beat that one's by ``doubt.margin``); one still
         under ``lost_score`` for ``relocalise_scans`` scans is relocalised in the submap. A
         match that refutes odometry is kept as it is; otherwise it is fused with the
         prediction. ``ang_step`` (rad) is the angular search step."""
@@ -325,7 +326,10 @@ class Tracker:
         )
         if score < cfg.retry_score:
             wide, wide_score = guess, -1.0
-            for g in guesses:
+            # the prediction the scan fits best at its centre first; another's window wins
+            # only by the odometry check's margin (in open space and look-alike places a
+            # wide window always holds some marginally better fit)
+            for g in [guess, *(g for g in guesses if g is not guess)]:
                 w, w_score = sm.correlative_search(
                     s.likelihood,
                     s.ox,
@@ -339,7 +343,7 @@ class Tracker:
                     0.0,
                     0.0,
                 )
-                if w_score > wide_score:
+                if w_score > wide_score + (0.0 if g is guess else cfg.doubt.margin):
                     wide, wide_score = w, w_score
             if wide_score > score:
                 pose, score = sm.correlative_search(
