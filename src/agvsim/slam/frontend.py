@@ -293,10 +293,10 @@ class Tracker:
         match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
         wide window around every prediction (where the scan fits poorly everywhere, the one it
         fits best at its centre need not be the one whose window holds the pose; another's
-        result must beat that one's by ``doubt.margin``); one still
-        under ``lost_score`` for ``relocalise_scans`` scans is relocalised in the submap. A
-        match that refutes odometry is kept as it is; otherwise it is fused with the
-        prediction. ``ang_step`` (rad) is the angular search step."""
+        result must beat that one's by ``doubt.margin``); one still under ``lost_score`` for
+        ``relocalise_scans`` scans is relocalised in the submap. A match that refutes odometry
+        is kept as it is; otherwise it is fused with the prediction. ``ang_step`` (rad) is the
+        angular search step."""
         guess = guesses[0]
         self.doubted = self.odom_suspect = False
         if not self.active:

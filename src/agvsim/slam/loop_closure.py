@@ -22,12 +22,13 @@ A closure is *verified* when
 1. its score (mean likelihood of the scan's points in the submap) is at least ``min_score``, and
 2. the matched global pose ``g_i'`` agrees with the graph (``D = g_i^-1 g_i'`` within
    ``agree_m`` and ``agree_rad``), or a recent pending closure ``j`` is consistent with it
-   and one of the two scores at least ``jump_min_score``: the two matched poses are placed as local
-   tracking placed the two keyframes, ``(g_j'^-1 g_i')^-1 (l_j^-1 l_i)`` within the same bounds
-   (pairwise consistency), ``j`` lies ``confirm_gap`` keyframes or more back and was matched in
-   another submap (neighbouring keyframes in one submap see the same walls and repeat the same
-   wrong fit). A single strong match in a place that merely looks alike cannot bend the graph
-   on its own; in a maze of 1 m cells a fit one cell off, half the scan on walls, is common.
+   and one of the two scores at least ``jump_min_score``: the two matched poses are placed as
+   local tracking placed the two keyframes, ``(g_j'^-1 g_i')^-1 (l_j^-1 l_i)`` within the
+   same bounds (pairwise consistency), ``j`` lies ``confirm_gap`` keyframes or more back and
+   was matched in another submap (neighbouring keyframes in one submap see the same walls and
+   repeat the same wrong fit). A single strong match in a place that merely looks alike
+   cannot bend the graph on its own; in a maze of 1 m cells a fit one cell off, half the scan
+   on walls, is common.
 """
 
 from __future__ import annotations
