@@ -49,7 +49,10 @@ class TrackingConfig:
     sigma_m: float = 0.05  # width of the likelihood field exp(-d^2 / 2 sigma^2)
     window_m: float = 0.15  # correlative search window around the odometry prediction, +-
     window_rad: float = math.radians(6.0)
-    prior_lin_weight: float = 2.0  # motion prior: score - w_t |dt|^2 - w_th dth^2 (1/m^2, 1/rad^2)
+    # motion prior of the narrow search when odometry is not fused (fuse_odometry False):
+    # score - w_t |dt|^2 - w_th dth^2 (1/m^2, 1/rad^2); a fused odometry enters only in the
+    # fusion, weighed by its learnt noise (Tracker.match)
+    prior_lin_weight: float = 2.0
     prior_ang_weight: float = 2.0
     retry_score: float = 0.6  # below it, search again in the wide window
     wide_window_m: float = 0.4
@@ -289,7 +292,8 @@ class Tracker:
 
     def match(self, points: F64, guesses: list[F64], ang_step: float) -> tuple[F64, float]:
         """Correlative search then Gauss-Newton against the older active submap, around the
-        prediction the scan fits best, in windows that grow with odometry's uncertainty. A poor
+        prediction the scan fits best, in windows that grow with odometry's uncertainty (with
+        no motion prior when odometry is fused: ties go to the candidate nearest it). A poor
         match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
         wide window around every prediction (where the scan fits poorly everywhere, the one it
         fits best at its centre need not be the one whose window holds the pose; another's
@@ -311,6 +315,12 @@ class Tracker:
             self.odom_suspect = best != 0
         odom_var = self.odometry_variance()
         win_m, win_rad = self.check.windows(odom_var, cfg.window_m, cfg.window_rad)
+        # a fused odometry pulls the pose once, in the fusion, by its learnt noise; a fixed
+        # prior here as well pulled matches towards a prediction several degrees off wherever
+        # odometry lags (smoothed over sparse scans), by a weight that knows no noise
+        w_lin, w_ang = cfg.prior_lin_weight, cfg.prior_ang_weight
+        if self.fusion is not None:
+            w_lin = w_ang = 0.0
         pose, score = sm.correlative_search(
             s.likelihood,
             s.ox,
@@ -321,8 +331,8 @@ class Tracker:
             win_m,
             win_rad,
             ang_step,
-            cfg.prior_lin_weight,
-            cfg.prior_ang_weight,
+            w_lin,
+            w_ang,
         )
         if score < cfg.retry_score:
             wide, wide_score = guess, -1.0
