@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_graph_slam import ANGLES, cast, loop_path
 
-from agvsim.slam.frontend import OdometryFusion, TrackingConfig
+from agvsim.slam.frontend import OdometryFusion, Tracker, TrackingConfig
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.odometry_check import DoubtConfig, OdometryCheck
 from agvsim.slam.se2 import between, wrap_angle
@@ -167,6 +167,21 @@ def test_a_freeze_longer_than_max_doubt_scans_keeps_its_reference() -> None:
     np.testing.assert_allclose(cands[-1], [1.0, 2.0, math.radians(93.0)], atol=1e-12)
 
 
+def _hall_tracker(cfg: TrackingConfig) -> tuple[Tracker, GraphSlam]:
+    """A tracker whose submap holds 20 keyframes along the test hall (y = 1.5 m, x from
+    1.5 m in 0.2 m steps), and the GraphSlam whose scans it was built from."""
+    from agvsim.slam.se2 import compose
+
+    tracker = Tracker(cfg)
+    slam = GraphSlam(30.0)
+    for node in range(20):
+        pose = np.array([1.5 + 0.2 * node, 1.5, 0.0])
+        _, ends, hits = slam.scan_points(cast(pose), ANGLES)
+        world = compose(pose, np.column_stack([ends, np.zeros(len(ends))]))[:, :2]
+        tracker.insert(node, pose, pose[:2], world, hits)
+    return tracker, slam
+
+
 def test_a_poor_fit_is_searched_widely_around_every_prediction() -> None:
     """A scan whose far half lies outside the submap (new space) fits poorly everywhere: 0.42
     at the truth. Of the two predictions, the one 70 deg off fits (marginally) better at its
@@ -175,17 +190,9 @@ def test_a_poor_fit_is_searched_widely_around_every_prediction() -> None:
     other window's by more than the odometry check's margin (it searched around the former
     alone, and ended far off). Relocalisation is off to test the wide search."""
     from agvsim.slam import scan_matching as sm
-    from agvsim.slam.frontend import Tracker
-    from agvsim.slam.se2 import compose
 
     cfg = TrackingConfig(fuse_odometry=False, relocalise_scans=10**6)
-    tracker = Tracker(cfg)
-    slam = GraphSlam(30.0)
-    for node in range(20):
-        pose = np.array([1.5 + 0.2 * node, 1.5, 0.0])
-        _, ends, hits = slam.scan_points(cast(pose), ANGLES)
-        world = compose(pose, np.column_stack([ends, np.zeros(len(ends))]))[:, :2]
-        tracker.insert(node, pose, pose[:2], world, hits)
+    tracker, slam = _hall_tracker(cfg)
     truth = np.array([3.0, 1.6, 0.05])
     pts, _, _ = slam.scan_points(cast(truth), ANGLES)
     unseen = np.column_stack([np.full(len(pts), 25.0), np.linspace(-5.0, 5.0, len(pts))])
@@ -213,8 +220,6 @@ def test_fused_odometry_does_not_also_pull_the_search(
     prediction that lags a turn; without fusion the prior is odometry's only say. Either way a
     prediction 5 deg and 10 cm off in the test hall is matched back to the truth."""
     from agvsim.slam import scan_matching as sm
-    from agvsim.slam.frontend import Tracker
-    from agvsim.slam.se2 import compose
 
     weights: list[tuple[float, float]] = []
     search = sm.correlative_search
@@ -225,13 +230,7 @@ def test_fused_odometry_does_not_also_pull_the_search(
 
     monkeypatch.setattr(sm, "correlative_search", spy)
     cfg = TrackingConfig(fuse_odometry=fuse, prior_lin_weight=3.0, prior_ang_weight=4.0)
-    tracker = Tracker(cfg)
-    slam = GraphSlam(30.0)
-    for node in range(20):
-        pose = np.array([1.5 + 0.2 * node, 1.5, 0.0])
-        _, ends, hits = slam.scan_points(cast(pose), ANGLES)
-        world = compose(pose, np.column_stack([ends, np.zeros(len(ends))]))[:, :2]
-        tracker.insert(node, pose, pose[:2], world, hits)
+    tracker, slam = _hall_tracker(cfg)
     truth = np.array([3.0, 1.6, 0.05])
     pts, _, _ = slam.scan_points(cast(truth), ANGLES)
     guess = truth + [0.1, 0.0, math.radians(5.0)]
