@@ -12,7 +12,7 @@ from test_graph_slam import ANGLES, cast, loop_path
 from agvsim.slam.frontend import OdometryFusion, Tracker, TrackingConfig
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.odometry_check import DoubtConfig, OdometryCheck
-from agvsim.slam.se2 import between, wrap_angle
+from agvsim.slam.se2 import between, compose, wrap_angle
 
 
 def test_prediction_from_the_reference_after_a_freeze() -> None:
@@ -170,8 +170,6 @@ def test_a_freeze_longer_than_max_doubt_scans_keeps_its_reference() -> None:
 def _hall_tracker(cfg: TrackingConfig) -> tuple[Tracker, GraphSlam]:
     """A tracker whose submap holds 20 keyframes along the test hall (y = 1.5 m, x from
     1.5 m in 0.2 m steps), and the GraphSlam whose scans it was built from."""
-    from agvsim.slam.se2 import compose
-
     tracker = Tracker(cfg)
     slam = GraphSlam(30.0)
     for node in range(20):
