@@ -88,6 +88,16 @@ def served_app(scenario_yaml: str, folder: Path) -> Iterator:
         app.stop()
 
 
+def click_scene_centre(page) -> None:
+    """Click the middle of the 3D view as a hand does: the pointer moves there first and
+    rests (a paused scene sends nothing, and the page draws only on demand)."""
+    box = page.locator("canvas").first.bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.wait_for_timeout(300)
+    page.mouse.click(x, y)
+
+
 @contextmanager
 def chromium() -> Iterator:
     """Debian's headless chromium driven by Playwright (never a downloaded browser)."""

@@ -11,7 +11,7 @@ import io
 import numpy as np
 import pytest
 
-from helpers import chromium, room_yaml, served_app, wait_for
+from helpers import chromium, click_scene_centre, room_yaml, served_app, wait_for
 
 pytestmark = pytest.mark.slow  # a real browser
 
@@ -125,18 +125,18 @@ def test_a_maze_cell_clicked_in_the_editor_becomes_a_wall_the_lidar_sees(app, pa
     page.wait_for_timeout(800)
     page.get_by_role("tab", name="World").click()
     page.get_by_label("edit maze").check()
+    wait_for(lambda: app.panel.edit.value, what="edit maze on the server")
     s.step(1)
     x = s.sim.state.poses[0, 0]
     assert s.sim.state.scans[0, 4] == pytest.approx(3.5 - x, abs=1e-6)  # the east wall ahead
-    box = page.locator("canvas").first.bounding_box()
     # the top view looks straight down on the map's centre: the middle cell (0, 0) m
-    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    click_scene_centre(page)
     wait_for(lambda: s.sim.world.grid.occupied[4, 4], what="the clicked cell to become a wall")
     s.step(1)
     x = s.sim.state.poses[0, 0]
     assert s.sim.state.scans[0, 4] == pytest.approx(-0.5 - x, abs=1e-6)  # the new wall's face
     page.get_by_text("is now a wall").wait_for(timeout=5000)
-    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    click_scene_centre(page)
     wait_for(lambda: not s.sim.world.grid.occupied[4, 4], what="the wall to go again")
     page.get_by_label("edit maze").uncheck()
     assert page.errors == []

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import chromium, room_yaml, served_app, wait_for
+from helpers import chromium, click_scene_centre, room_yaml, served_app, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -215,9 +215,9 @@ def test_a_click_in_the_top_view_places_the_picked_robot(app, page):
     page.wait_for_timeout(1500)
     page.get_by_role("tab", name="World").click()
     page.get_by_label("place robots").check()
-    box = page.locator("canvas").first.bounding_box()
-    # the top view looks straight down on the map's centre, (0, 0)
-    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    # the click counts only once the server has the tick (a fast page clicks before it)
+    wait_for(lambda: app.panel.place.value, what="place robots on the server")
+    click_scene_centre(page)  # the top view looks straight down on the map's centre, (0, 0)
     wait_for(lambda: np.hypot(*s.sim.state.poses[0, :2]) < 0.3, 60.0, "agv at the click")
     page.get_by_text("agv placed at").first.wait_for(timeout=60000)
     page.get_by_label("place robots").uncheck()

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from helpers import chromium, room_yaml, served_app, wait_for
+from helpers import chromium, click_scene_centre, room_yaml, served_app, wait_for
 
 pytestmark = pytest.mark.slow  # a real browser
 
@@ -62,10 +62,10 @@ def test_the_friction_brush_paints_the_floor_under_a_click(app, page):
     brush.fill("0.1")
     brush.press("Enter")
     page.get_by_label("edit maze").check()
-    page.wait_for_timeout(300)
-    box = page.locator("canvas").first.bounding_box()
+    # the click counts only once the server has the brush and the tick
+    wait_for(lambda: app.panel.edit.value and app.panel.brush_mu.value == 0.1, what="the brush on")
     # the top view looks straight down on the map's centre: the middle cell (0, 0) m
-    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    click_scene_centre(page)
     wait_for(lambda: s.sim.world.floor.mu_at(0.0, 0.0) == 0.1, what="the painted friction")
     page.get_by_text("now has friction 0.1").wait_for(timeout=5000)
     assert s.sim.world.floor.mu_at(1.0, 0.0) == 0.8  # the next cell: the floor's

@@ -70,6 +70,7 @@ class Panel:
         self._apply_button: Any = None
         self._apply_note = ""
         self._plot_layout: tuple | None = None
+        self._plot_sent: tuple | None = None  # (layout, last time, samples) the plots show
         self.view_pick: dict[int, Any] = {}  # client id -> its own view dropdown
         # GUI structure changes come from callbacks and from the refresh loop: one at a time
         self._gui_lock = threading.RLock()
@@ -704,6 +705,12 @@ class Panel:
                 # only when the wheels differ: the browser redraws an emptied plot when the
                 # series are sent again (the empty plot after Apply)
                 self.plot_wheels.series = series
+        # the same history is not sent again (viser resends arrays on every assignment, and
+        # a paused run's plots sent five times a second kept the browser redrawing them)
+        sent = (key, float(t[-1]), len(t))
+        if sent == self._plot_sent:
+            return
+        self._plot_sent = sent
         self.plot_wheels.data = (t, *hw4.T)
         self.plot_twist.data = (t, *ht.T)
 

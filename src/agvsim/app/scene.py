@@ -69,6 +69,7 @@ class SceneView:
         self._beams: Any = None
         self._hits: Any = None
         self._trails: Any = None
+        self._trails_key: tuple | None = None  # what the trails sent last showed
         self._overlay_node: Any = None
         self._markers: list[Any] = []
         self._layout_nodes: list[Any] = []  # the scenario's layout: nodes, edges, stations
@@ -331,6 +332,12 @@ class SceneView:
         self._hits.visible = True
 
     def _update_trails(self, trails: list[np.ndarray]) -> None:
+        # unchanged trails (a paused run) are not sent again: each re-add rebuilds the
+        # browser's line geometry, and four a second kept a software-rendered page busy
+        key = tuple((len(t), *map(float, t[-1])) if len(t) else (0,) for t in trails)
+        if key == self._trails_key:
+            return
+        self._trails_key = key
         segs = []
         for t in trails:
             if len(t) >= 2:
