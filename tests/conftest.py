@@ -33,3 +33,30 @@ def one_numba_thread():
     numba.set_num_threads(1)
     yield
     numba.set_num_threads(before)
+
+
+# The longest modules (minutes each on 2 cores: the demos' simulated hours, the first-run
+# browser session, the long fuzz rounds, the fleet's hours, the false-closure graph): started
+# first, so that no worker begins one of them while the other has run out of tests.
+LONGEST_FIRST = (
+    "test_demo_endurance.py",
+    "test_app_firstrun_browser.py",
+    "test_fuzz_inputs.py",
+    "test_master_fleet.py",
+    "test_posegraph_graduated.py",
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Longest modules first, then the other modules with slow tests, then the rest; each
+    module's tests stay together and in their order (module fixtures are built once a
+    worker). xdist hands the tests out in this order and lets an idle worker take over the
+    queue's tail."""
+    slow = {item.path for item in items if item.get_closest_marker("slow") is not None}
+
+    def rank(item: pytest.Item) -> int:
+        if item.path.name in LONGEST_FIRST:
+            return LONGEST_FIRST.index(item.path.name)
+        return len(LONGEST_FIRST) + (0 if item.path in slow else 1)
+
+    items.sort(key=rank)
