@@ -3,12 +3,20 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import numba
 import pytest
 
 MOST_WORKERS = 8  # each worker may hold a browser, a broker or a SLAM log at once
+
+# A shell starts a background job (`pytest &` without job control, nohup) with Ctrl-C
+# ignored, and every process started from it inherits that: the tests of Ctrl-C handling
+# would fail. Ctrl-C is given back its default here (the processes the tests start then get
+# it too: a caught signal is reset to the default in a new program).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:

@@ -212,15 +212,41 @@ def test_a_click_in_the_top_view_places_the_picked_robot(app, page):
     page.get_by_role("tab", name="Run").click()
     page.get_by_label("view").first.click()
     page.get_by_role("option", name="top plan", exact=True).click()
-    page.wait_for_timeout(1500)
+    _wait_for_top_view(app)
     page.get_by_role("tab", name="World").click()
     page.get_by_label("place robots").check()
     # the click counts only once the server has the tick (a fast page clicks before it)
     wait_for(lambda: app.panel.place.value, what="place robots on the server")
     click_scene_centre(page)  # the top view looks straight down on the map's centre, (0, 0)
-    wait_for(lambda: np.hypot(*s.sim.state.poses[0, :2]) < 0.3, 60.0, "agv at the click")
+    try:
+        wait_for(lambda: np.hypot(*s.sim.state.poses[0, :2]) < 0.3, 60.0, "agv at the click")
+    except AssertionError as err:  # say what the World tab said, and where agv stands
+        raise AssertionError(
+            f"{err}: agv at {s.sim.state.poses[0, :2]}, note {app.panel.world_msg.content!r}"
+        ) from None
     page.get_by_text("agv placed at").first.wait_for(timeout=60000)
     page.get_by_label("place robots").uncheck()
+
+
+def _wait_for_top_view(app) -> None:
+    """Until the browser reports its camera at the top plan view (the click's ray is cast
+    from the camera the page has, not from the one the server asked for)."""
+    from agvsim.app import shapes
+
+    grid = app.session.sim.world.grid
+
+    def there() -> bool:
+        clients = list(app.server.get_clients().values())
+        if not clients:
+            return False
+        cam = clients[0].camera
+        want = shapes.camera_top(grid, cam.fov)
+        return bool(
+            np.allclose(cam.position, want.position, atol=0.05)
+            and np.allclose(cam.look_at, want.look_at, atol=0.05)
+        )
+
+    wait_for(there, 60.0, "the camera at the top view")
 
 
 def test_the_console_stays_quiet(app, page):
