@@ -280,7 +280,9 @@ class SceneView:
             table = sim.sensors
             grid = sim.world.grid
             markers = sim.world.appearance.markers
-            trails = [np.array(h.trail) for h in s.history.values()] if self.show_trails else []
+            trails = None  # copied only on the frames that send them (every tenth)
+            if self._frame % 10 == 0:
+                trails = [np.array(h.trail) for h in s.history.values()] if self.show_trails else []
             kinds = _sensor_kinds(s.config, table)
             specs, safety = sim.robots, (st.safety_set.copy(), st.safety_status.copy())
         with self.server.atomic():
@@ -300,7 +302,7 @@ class SceneView:
                     node.wxyz = q[k]
             self._update_beams(table, poses, scans, kinds)
             self._fields.update(self.server, specs, *safety)
-            if self._frame % 10 == 0:
+            if trails is not None:
                 self._update_trails(trails)
         self._frame += 1
         self.frames_sent += 1
