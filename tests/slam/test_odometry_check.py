@@ -237,3 +237,39 @@ def test_fused_odometry_does_not_also_pull_the_search(
     assert score > cfg.retry_score and len(weights) == 1  # no wide search needed
     assert np.hypot(*(pose[:2] - truth[:2])) <= cfg.resolution_m + 1e-9
     assert abs(wrap_angle(pose[2] - truth[2])) < math.radians(1.0)
+
+
+def test_search_windows_grow_with_the_turn_predicted() -> None:
+    """Heading variance 1e-4 rad^2 a scan, one scan since the reference, and a turn whose
+    learnt error adds (0.05 rad)^2: the std is sqrt(1e-4 + 25e-4) = 0.05099 rad and the
+    window 3 x 0.05099 = 0.15297 rad; without ``turn_windows`` the turn adds nothing."""
+    base_m, base_rad = 0.15, math.radians(6.0)
+    var = (1e-6, 1e-4)
+    chk = OdometryCheck(DoubtConfig())
+    assert chk.windows(var, base_m, base_rad, 0.05**2)[1] == pytest.approx(0.152971, abs=1e-6)
+    assert chk.windows(var, base_m, base_rad, 0.0) == (base_m, base_rad)
+    off = OdometryCheck(DoubtConfig(turn_windows=False))
+    assert off.windows(var, base_m, base_rad, 0.05**2) == (base_m, base_rad)
+
+
+def test_a_lost_scan_that_fits_nowhere_keeps_the_prediction() -> None:
+    """Scans of scattered returns (0.5-4 m, drawn once) fit nowhere in the test hall (under
+    ``lost_score`` even after the wide search and the relocalisation). The first two are poor
+    scans (the search's least bad pose is kept, not mapped); from the third tracking is lost
+    and such a scan keeps the prediction exactly, as the wide window's best lies outside the
+    narrow window. With ``unmatched_hold_scans=0`` the least bad pose is kept as before."""
+    room = np.random.default_rng(5).uniform(0.5, 4.0, ANGLES.size)
+    for hold, keeps in [(9, True), (0, False)]:
+        cfg = TrackingConfig(fuse_odometry=False, unmatched_hold_scans=hold)
+        tracker, slam = _hall_tracker(cfg)
+        pts, _, _ = slam.scan_points(room, ANGLES)
+        guess = np.array([3.0, 1.5, 0.3])
+        for k in range(3):
+            pose, score = tracker.match(pts, [guess], slam.angular_step(pts))
+            assert score < cfg.lost_score
+            assert tracker.lost == (k == 2)
+        assert tracker.unmatched == keeps
+        assert np.array_equal(pose, guess) == keeps
+        if not keeps:  # the least bad pose lies outside the narrow window (0.15 m, 6 deg)
+            off = between(guess, pose)
+            assert abs(off[2]) > cfg.window_rad or np.abs(off[:2]).max() > cfg.window_m

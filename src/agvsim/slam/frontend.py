@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from agvsim.angles import wrap_scalar
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.fusion import OdometryFusion
 from agvsim.slam.mapping import (
@@ -81,6 +82,12 @@ class TrackingConfig:
     match_ceiling_rad: float = math.radians(1.0)
     lost_score: float = 0.35  # below it after the wide search: lost (relocalise_scans, lost_scans)
     lost_scans: int = 3
+    # a lost scan (lost_scans poor ones in a row) that still fits under lost_score at a pose
+    # outside the narrow window is *unmatched*: a wide window's least bad fit says nothing of
+    # its pose, so it keeps the prediction and is not mapped (GraphSlam) while the poor scans
+    # in a row number at most this; past it the robot is taken to drive through unmapped
+    # space and is mapped at the prediction. 0: such a scan keeps its search result
+    unmatched_hold_scans: int = 9
     # a scan under lost_score even after the wide search is looked for over
     # +-relocalise_window_m and every heading in the submap from this many such scans in a row
     # (1: at once; between sparse scans the robot moves and turns far)
@@ -271,6 +278,7 @@ class Tracker:
         self.n_relocalised = 0
         self.lost = False  # tracking lost and not found again near the prediction
         self.poor = 0  # scans in a row that fit under retry_score
+        self.unmatched = False  # the last scan was lost and fit under lost_score everywhere
         self._lost = 0
 
     def predict(self, odom_pose: F64) -> list[F64]:
@@ -298,11 +306,16 @@ class Tracker:
         wide window around every prediction (where the scan fits poorly everywhere, the one it
         fits best at its centre need not be the one whose window holds the pose; another's
         result must beat that one's by ``doubt.margin``); one still under ``lost_score`` for
-        ``relocalise_scans`` scans is relocalised in the submap. A match that refutes odometry
+        ``relocalise_scans`` scans is relocalised in the submap; one that tracking lost and that
+        still fits under ``lost_score``, outside the narrow window, keeps the prediction
+        (``unmatched_hold_scans``). The
+        heading window also grows with the turn the prediction makes, by odometry's learnt
+        error per radian turned (:meth:`~.fusion.OdometryFusion.estimate_turn_ratio`).
+        A match that refutes odometry
         is kept as it is; otherwise it is fused with the prediction. ``ang_step`` (rad) is the
         angular search step."""
         guess = guesses[0]
-        self.doubted = self.odom_suspect = False
+        self.doubted = self.odom_suspect = self.unmatched = False
         if not self.active:
             return guess, 0.0
         s, cfg = self.active[0], self.cfg
@@ -314,7 +327,12 @@ class Tracker:
             # the scan-to-scan increment was wrong (a stall, or the jump after one)
             self.odom_suspect = best != 0
         odom_var = self.odometry_variance()
-        win_m, win_rad = self.check.windows(odom_var, cfg.window_m, cfg.window_rad)
+        turn_var = 0.0
+        if self.fusion is not None and self.pose is not None:
+            # odometry's heading error in proportion to the turn it predicts (learnt)
+            turn = abs(wrap_scalar(guess[2] - self.pose[2]))
+            turn_var = (self.fusion.turn_ratio * turn) ** 2
+        win_m, win_rad = self.check.windows(odom_var, cfg.window_m, cfg.window_rad, turn_var)
         # a fused odometry pulls the pose once, in the fusion, by its learnt noise; a fixed
         # prior here as well pulled matches towards a prediction several degrees off wherever
         # odometry lags (smoothed over sparse scans), by a weight that knows no noise
@@ -375,6 +393,15 @@ class Tracker:
         # a poor fit even after the wide search: kidnapped, or entering unmapped space
         self.poor = self.poor + 1 if score < cfg.retry_score else 0
         self.lost = self._lost >= cfg.lost_scans or self.poor >= cfg.lost_scans
+        off = between(guess, pose)
+        outside = abs(off[2]) > win_rad or max(abs(off[0]), abs(off[1])) > win_m
+        self.unmatched = (
+            cfg.unmatched_hold_scans > 0 and self.lost and score < cfg.lost_score and outside
+        )
+        if self.unmatched:
+            # in the Intel lab at 1 Hz the wide window's least bad pose of such a scan (0.12,
+            # 32 deg off the prediction) was mapped and turned the middle rooms by 45 deg
+            return guess.copy(), score
         refined, score2, _ = sm.gauss_newton(
             s.likelihood, s.ox, s.oy, res, points, pose, cfg.gn_iterations, cfg.gn_prior_weight
         )
@@ -425,7 +452,7 @@ class Tracker:
         done = self.finish_all()
         self.pose = np.asarray(pose, np.float64).copy()
         self.check = OdometryCheck(self.cfg.doubt)
-        self.lost, self._lost, self.poor = False, 0, 0
+        self.lost, self._lost, self.poor, self.unmatched = False, 0, 0, False
         self.n_relocalised += 1
         return done
 

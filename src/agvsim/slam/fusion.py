@@ -8,7 +8,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from agvsim.angles import wrap_scalar
+from agvsim.angles import wrap_angle, wrap_scalar
 from agvsim.slam.se2 import between
 
 __all__ = ["OdometryFusion"]
@@ -18,6 +18,8 @@ F64 = NDArray[np.float64]
 _MIN_SCALE_PATH_M = 5.0  # path in the window (m) before odometry's scale is estimated
 _SCALE_RANGE = (0.8, 1.25)  # a scale estimate outside is clamped (a wrong wheel radius)
 _SCALE_MEMORY = 1.0 - 1.0 / 3000.0  # weight of a scan's increment per scan since
+_TURN_MIN_RAD = 0.2  # scans turning less are left out of the turn ratio (match noise)
+_TURN_MIN_SCANS = 10
 
 
 class OdometryFusion:
@@ -56,7 +58,13 @@ class OdometryFusion:
     at every lag, and all of it would be put on the match, so the fusion would trust that
     odometry fully. A match that fits is not off by more than about a cell or a degree, so
     the learnt match spread is capped at ``match_ceilings`` (std) and the rest is odometry's
-    (:meth:`estimate`)."""
+    (:meth:`estimate`).
+
+    That capped spread is still one figure for every scan, and a robust one: where most scans
+    go straight it shows the straight scans. :meth:`estimate_turn_ratio` learns the part of
+    odometry's heading error that follows the turn (std per radian turned, from the scans
+    that turned at least ``_TURN_MIN_RAD``), with which tracking widens its heading window
+    at a turn (:meth:`~.odometry_check.OdometryCheck.windows`)."""
 
     def __init__(
         self,
@@ -77,6 +85,7 @@ class OdometryFusion:
         self._scale = 1.0  # see scale()
         self._scale_sums = (0.0, 0.0, 0.0)  # sum m.o, sum o.o, path (m), with forgetting
         self._count = 0
+        self.turn_ratio = 0.0  # see estimate_turn_ratio()
         self._raw: F64 | None = None
         self._last_odom: F64 | None = None
 
@@ -110,6 +119,7 @@ class OdometryFusion:
         if self.ready() and self._count % 10 == 0:
             self._scale = self.estimate_scale()
             self._k = self.estimate()
+            self.turn_ratio = self.estimate_turn_ratio()
         s_o, s_m, k_rot, s_or = self._k
         if step is not None:
             f_t, f_r = self.floor_variance(step)
@@ -125,6 +135,15 @@ class OdometryFusion:
         out[:2] = guess[:2] + v @ d
         out[2] = guess[2] + k_rot * wrap_scalar(match[2] - guess[2])
         return out
+
+    def estimate_turn_ratio(self) -> float:
+        """Odometry's heading error per radian turned (std), from the scans so far."""
+        n = min(len(self.matches), len(self.odoms))
+        if n < 3:
+            return 0.0
+        m = np.asarray(self.matches[-n:])
+        o = np.asarray(self.odoms[-n:])
+        return _turn_ratio(m, o, _spread(m, o, 1, self._scale)[1])
 
     def scale(self) -> float:
         """Odometry's translation scale as last estimated (1 until :meth:`ready`)."""
@@ -219,6 +238,21 @@ class OdometryFusion:
             out.append((s_o, s_m))
         (so_t, sm_t), (so_r, sm_r) = out
         return so_t, sm_t, so_r / (so_r + sm_r), so_r
+
+
+def _turn_ratio(m: F64, o: F64, base_var: float) -> float:
+    """Robust std of odometry's heading error per radian it turned, scan to scan, over the
+    scans that turned at least ``_TURN_MIN_RAD`` (their error's square less ``base_var``, the
+    spread of scans that did not turn); 0 with fewer than ``_TURN_MIN_SCANS`` such scans."""
+    do = between(o[:-1], o[1:])
+    dm = between(m[:-1], m[1:])
+    turn = np.abs(wrap_angle(do[:, 2]))
+    sel = turn >= _TURN_MIN_RAD
+    if int(sel.sum()) < _TURN_MIN_SCANS:
+        return 0.0
+    e = wrap_angle(dm[sel, 2] - do[sel, 2])
+    excess = np.sqrt(np.maximum(e * e - base_var, 0.0))
+    return float(1.4826 * np.median(excess / turn[sel]))
 
 
 def _spread(m: F64, o: F64, lag: int, scale: float = 1.0) -> tuple[float, float]:

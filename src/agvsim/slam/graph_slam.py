@@ -222,6 +222,10 @@ class GraphSlam:
         hold = (
             self.cfg.global_relocalisation and 0 < self.tracker.poor < self.cfg.tracking.lost_scans
         )
+        # nor is a lost scan that fits nowhere, until the robot has driven on for a while
+        hold = hold or (
+            self.tracker.unmatched and self.tracker.poor <= self.cfg.tracking.unmatched_hold_scans
+        )
         if self.tracker.lost and self._relocalise_due():
             found = self.relocalise(points, pose, score)
             if found is not None:

@@ -24,7 +24,11 @@ slipped for good and is right again from here).
 
 The heading and translation search windows grow with that same spread (:meth:`windows`):
 ``window_sigmas`` standard deviations of the prediction, between the configured narrow window
-and ``max_window_rad`` / the wide window.
+and ``max_window_rad`` / the wide window. The heading's spread also has a part in proportion to
+the turn the prediction makes (``turn_windows``; odometry's error per radian turned, learnt by
+:meth:`~.fusion.OdometryFusion.estimate_turn_ratio`): odometry that lags or is smoothed
+between sparse scans is off by a share of every turn and right on the straight, which a
+spread learnt over all scans (robustly: most scans go straight) does not show.
 """
 
 from __future__ import annotations
@@ -59,6 +63,7 @@ class DoubtConfig:
     window_sigmas: float = 3.0
     max_window_m: float = 0.4
     max_window_rad: float = math.radians(45.0)
+    turn_windows: bool = True  # the heading window grows with the turn predicted (windows())
 
 
 class OdometryCheck:
@@ -101,16 +106,22 @@ class OdometryCheck:
         return math.sqrt(n * odom_var[0]), math.sqrt(n * odom_var[1])
 
     def windows(
-        self, odom_var: tuple[float, float] | None, base_m: float, base_rad: float
+        self,
+        odom_var: tuple[float, float] | None,
+        base_m: float,
+        base_rad: float,
+        turn_var: float = 0.0,
     ) -> tuple[float, float]:
-        """Search half-widths: ``window_sigmas`` stds of the prediction, at least the base."""
+        """Search half-widths: ``window_sigmas`` stds of the prediction, at least the base;
+        ``turn_var`` (rad^2) is heading variance added for the turn this scan made."""
         s = self.spread(odom_var)
         if s is None or not self.cfg.enabled:
             return base_m, base_rad
         k = self.cfg.window_sigmas
+        s_rad = math.sqrt(s[1] ** 2 + (turn_var if self.cfg.turn_windows else 0.0))
         return (
             min(max(base_m, k * s[0]), max(self.cfg.max_window_m, base_m)),
-            min(max(base_rad, k * s[1]), max(self.cfg.max_window_rad, base_rad)),
+            min(max(base_rad, k * s_rad), max(self.cfg.max_window_rad, base_rad)),
         )
 
     def disagrees(
