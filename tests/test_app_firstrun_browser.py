@@ -217,13 +217,22 @@ def test_a_click_in_the_top_view_places_the_picked_robot(app, page):
     page.get_by_label("place robots").check()
     # the click counts only once the server has the tick (a fast page clicks before it)
     wait_for(lambda: app.panel.place.value, what="place robots on the server")
-    click_scene_centre(page)  # the top view looks straight down on the map's centre, (0, 0)
-    try:
-        wait_for(lambda: np.hypot(*s.sim.state.poses[0, :2]) < 0.3, 60.0, "agv at the click")
-    except AssertionError as err:  # say what the World tab said, and where agv stands
-        raise AssertionError(
-            f"{err}: agv at {s.sim.state.poses[0, :2]}, note {app.panel.world_msg.content!r}"
-        ) from None
+    # the top view looks straight down on the map's centre, (0, 0). A page that draws only on
+    # demand can cast the first click's ray from the view it drew before the top view (seen
+    # once in a fresh-clone run on software-rendered Chromium: agv placed at (-1.94, -0.27));
+    # a second click at the same spot, with the page drawn, must land
+    notes = []
+    for attempt in range(2):
+        click_scene_centre(page)
+        try:
+            wait_for(lambda: np.hypot(*s.sim.state.poses[0, :2]) < 0.3, 20.0, "agv at the click")
+            break
+        except AssertionError as err:  # say what the World tab said, and where agv stands
+            note = app.panel.world_msg.content
+            notes.append(f"{err}: agv at {s.sim.state.poses[0, :2]}, note {note!r}")
+            if attempt == 1:
+                raise AssertionError("; ".join(notes)) from None
+            page.wait_for_timeout(1000)
     page.get_by_text("agv placed at").first.wait_for(timeout=60000)
     page.get_by_label("place robots").uncheck()
 
