@@ -278,7 +278,8 @@ class Tracker:
         self.n_relocalised = 0
         self.lost = False  # tracking lost and not found again near the prediction
         self.poor = 0  # scans in a row that fit under retry_score
-        self.unmatched = False  # the last scan was lost and fit under lost_score everywhere
+        # the last scan was lost and fit under lost_score, best outside the narrow window
+        self.unmatched = False
         self._lost = 0
 
     def predict(self, odom_pose: F64) -> list[F64]:
@@ -308,10 +309,9 @@ class Tracker:
         result must beat that one's by ``doubt.margin``); one still under ``lost_score`` for
         ``relocalise_scans`` scans is relocalised in the submap; one that tracking lost and that
         still fits under ``lost_score``, outside the narrow window, keeps the prediction
-        (``unmatched_hold_scans``). The
-        heading window also grows with the turn the prediction makes, by odometry's learnt
-        error per radian turned (:meth:`~.fusion.OdometryFusion.estimate_turn_ratio`).
-        A match that refutes odometry
+        (``unmatched_hold_scans``). The heading window also grows with the turn the prediction
+        makes, by odometry's learnt error per radian turned
+        (:meth:`~.fusion.OdometryFusion.estimate_turn_ratio`). A match that refutes odometry
         is kept as it is; otherwise it is fused with the prediction. ``ang_step`` (rad) is the
         angular search step."""
         guess = guesses[0]

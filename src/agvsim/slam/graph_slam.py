@@ -234,6 +234,7 @@ class GraphSlam:
                 self.motion.last_pose = None  # a keyframe here, tied to where it was found
                 self.n_global_relocalised += 1
                 self._fit = None  # found: odometry counts from here
+                hold = False  # and the scan is mapped where it was found
         if score >= self.cfg.tracking.retry_score or self._fit is None:
             self._fit, self._since_fit, self._froze = (pose.copy(), self._odom.copy()), 0, False
         else:
