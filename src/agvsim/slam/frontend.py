@@ -393,6 +393,8 @@ class Tracker:
         # a poor fit even after the wide search: kidnapped, or entering unmapped space
         self.poor = self.poor + 1 if score < cfg.retry_score else 0
         self.lost = self._lost >= cfg.lost_scans or self.poor >= cfg.lost_scans
+        # farther than the window's half-widths, in the prediction's frame: a wide-search
+        # pose, or a narrow one on the window's edge or corner (docs/slam.md, eighth round)
         off = between(guess, pose)
         outside = abs(off[2]) > win_rad or max(abs(off[0]), abs(off[1])) > win_m
         self.unmatched = (
