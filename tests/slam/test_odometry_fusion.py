@@ -149,3 +149,20 @@ def test_heading_error_per_radian_turned_is_learnt() -> None:
     assert fusion.turn_ratio == pytest.approx(fusion.estimate_turn_ratio(), rel=0.1)
     straight, *_ = feed(sigma_match=0.001, sigma_odom=0.004)
     assert straight.estimate_turn_ratio() == 0.0
+
+
+def test_a_turn_weighs_the_heading_by_the_learnt_error_per_radian() -> None:
+    """Odometry's heading variance 1e-4 rad^2 and the match's 1e-4 (gain 0.5); a learnt error
+    of 0.5 rad per radian turned. A prediction that turns 0.4 rad adds (0.5 * 0.4)^2 = 0.04 to
+    odometry's variance: gain 0.0401 / 0.0402, so a match 0.1 rad off moves the heading by
+    0.0997512 rad. Driving straight, or with ``turn_gain`` off, the gain stays 0.5."""
+    guess = np.array([1.0, 2.0, 0.3])
+    match = guess + np.array([0.0, 0.0, 0.1])
+    turn, straight = np.array([0.05, 0.0, 0.4]), np.array([0.2, 0.0, 0.0])
+    for gain in (True, False):
+        fusion = OdometryFusion(window=300, lag=10, turn_gain=gain)
+        fusion.preset((1e-4, 1e-4, 0.5, 1e-4))
+        fusion.turn_ratio = 0.5
+        moved = fusion.fuse(guess, match, np.eye(3), turn)[2] - guess[2]
+        assert moved == pytest.approx(0.1 * 0.0401 / 0.0402 if gain else 0.05, rel=1e-9)
+        assert fusion.fuse(guess, match, np.eye(3), straight)[2] - guess[2] == pytest.approx(0.05)

@@ -80,6 +80,10 @@ class TrackingConfig:
     # learnt spread is odometry's error that does not build up (.fusion.OdometryFusion)
     match_ceiling_m: float = 0.05
     match_ceiling_rad: float = math.radians(1.0)
+    # odometry's heading error per radian turned (learnt, .fusion) weighs the fusion too: in a
+    # turn the match's heading counts for more (the heading window grows with it regardless,
+    # doubt.turn_windows)
+    turn_fusion: bool = True
     lost_score: float = 0.35  # below it after the wide search: lost (relocalise_scans, lost_scans)
     lost_scans: int = 3
     # a lost scan (lost_scans poor ones in a row) that still fits under lost_score at a pose
@@ -268,6 +272,7 @@ class Tracker:
                 cfg.fusion_lag,
                 floors,
                 (cfg.match_ceiling_m, cfg.match_ceiling_rad),
+                cfg.turn_fusion,
             )
             if cfg.fuse_odometry
             else None

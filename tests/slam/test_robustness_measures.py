@@ -1,0 +1,64 @@
+"""The robustness suite's measure for thinned logs (benchmarks/bench_slam_robustness.py,
+``kept_ratio``), on trajectories whose errors are worked out by hand."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agvsim.slam.evaluate import Relations
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _bench():  # type: ignore[no-untyped-def]
+    spec = importlib.util.spec_from_file_location(
+        "bench_slam_robustness", ROOT / "benchmarks" / "bench_slam_robustness.py"
+    )
+    mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(mod)  # type: ignore[union-attr]
+    return mod
+
+
+def _line(t: np.ndarray, speed: float) -> np.ndarray:
+    return np.column_stack([speed * t, np.zeros_like(t), np.zeros_like(t)])
+
+
+def test_kept_ratio_scores_every_relation_between_the_kept_scans() -> None:
+    """Truth drives 1 m/s along x, scans at 10 Hz for 10 s, each scan related to the one 1 s
+    later (91 relations). The unperturbed run reads 1.1 m/s (0.1 m off per relation), the
+    thinned run keeps one scan a second but not those at 4 and 5 s and reads 1.2 m/s (0.2 m
+    off): a 3 s gap, so the 39 relations with an end strictly between 3 and 6 s are left out
+    (t1 = 2.1 ... 5.9 s); 52 remain, and motion on a line interpolates exactly: ratio 2."""
+    b = _bench()
+    t = np.arange(101) * 0.1
+    rel = Relations(t[:91], t[10:], np.tile([1.0, 0.0, 0.0], (91, 1)))
+    kept = np.array([k for k in range(0, 101, 10) if k not in (40, 50)])
+    ratio, n = b.kept_ratio(t[kept], _line(t[kept], 1.2), t, _line(t, 1.1), rel)
+    assert n == 52
+    assert ratio == pytest.approx(2.0, rel=1e-9)
+    # only the scans both kept count: a wider gap leaves nothing but the exact ends
+    assert b.kept_ratio(t[kept], _line(t[kept], 1.2), t, _line(t, 1.1), rel, 0.5) == (
+        pytest.approx(2.0, rel=1e-9),
+        7,  # 0-1, 1-2, 2-3, 6-7, 7-8, 8-9, 9-10 s
+    )
+
+
+def test_kept_ratio_charges_the_interpolation_to_both_runs() -> None:
+    """On a circle (1 m radius, 0.5 rad/s) a chord between kept scans 1 s apart misses the
+    arc, so reading poses between them is wrong; a thinned run whose kept poses are exactly
+    the unperturbed run's scores 1, however wrong the interpolation."""
+    b = _bench()
+    t = np.arange(101) * 0.1
+    truth = np.column_stack([np.cos(0.5 * t), np.sin(0.5 * t), 0.5 * t + np.pi / 2])
+    from agvsim.slam.se2 import between
+
+    rel = Relations(t[:95], t[6:], between(truth[:95], truth[6:]))
+    noisy = truth + np.random.default_rng(0).normal(0.0, 0.01, truth.shape)
+    kept = np.arange(0, 101, 10)
+    ratio, n = b.kept_ratio(t[kept], noisy[kept], t, noisy, rel)
+    assert n == 95
+    assert ratio == pytest.approx(1.0, abs=1e-12)
