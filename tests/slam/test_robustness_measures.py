@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agvsim.slam.evaluate import Relations
+from agvsim.slam.evaluate import Relations, Trajectory, evaluate_relations
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -37,11 +37,12 @@ def test_kept_ratio_scores_every_relation_between_the_kept_scans() -> None:
     t = np.arange(101) * 0.1
     rel = Relations(t[:91], t[10:], np.tile([1.0, 0.0, 0.0], (91, 1)))
     kept = np.array([k for k in range(0, 101, 10) if k not in (40, 50)])
-    ratio, n = b.kept_ratio(t[kept], _line(t[kept], 1.2), t, _line(t, 1.1), rel)
+    ratio, n, read = b.kept_ratio(t[kept], _line(t[kept], 1.2), t, _line(t, 1.1), rel)
     assert n == 52
     assert ratio == pytest.approx(2.0, rel=1e-9)
+    assert read == pytest.approx(0.1, rel=1e-9)
     # only the scans both kept count: a wider gap leaves nothing but the exact ends
-    assert b.kept_ratio(t[kept], _line(t[kept], 1.2), t, _line(t, 1.1), rel, 0.5) == (
+    assert b.kept_ratio(t[kept], _line(t[kept], 1.2), t, _line(t, 1.1), rel, 0.5)[:2] == (
         pytest.approx(2.0, rel=1e-9),
         7,  # 0-1, 1-2, 2-3, 6-7, 7-8, 8-9, 9-10 s
     )
@@ -49,16 +50,20 @@ def test_kept_ratio_scores_every_relation_between_the_kept_scans() -> None:
 
 def test_kept_ratio_charges_the_interpolation_to_both_runs() -> None:
     """On a circle (1 m radius, 0.5 rad/s) a chord between kept scans 1 s apart misses the
-    arc, so reading poses between them is wrong; a thinned run whose kept poses are exactly
-    the unperturbed run's scores 1, however wrong the interpolation."""
+    arc, so reading poses between them is wrong (the unperturbed run, 2 mm off per pose, is
+    off by over twice its own error when read that way); a thinned run whose kept poses are
+    exactly the unperturbed run's scores 1, however wrong the interpolation."""
     b = _bench()
     t = np.arange(101) * 0.1
     truth = np.column_stack([np.cos(0.5 * t), np.sin(0.5 * t), 0.5 * t + np.pi / 2])
     from agvsim.slam.se2 import between
 
     rel = Relations(t[:95], t[6:], between(truth[:95], truth[6:]))
-    noisy = truth + np.random.default_rng(0).normal(0.0, 0.01, truth.shape)
+    noisy = truth + np.random.default_rng(0).normal(0.0, 0.002, truth.shape)
     kept = np.arange(0, 101, 10)
-    ratio, n = b.kept_ratio(t[kept], noisy[kept], t, noisy, rel)
+    ratio, n, read = b.kept_ratio(t[kept], noisy[kept], t, noisy, rel)
     assert n == 95
     assert ratio == pytest.approx(1.0, abs=1e-12)
+    # the chords: the unperturbed run read between its kept scans is far off
+    exact = evaluate_relations(Trajectory(t, noisy), rel).translation_mean_m
+    assert read > 2.0 * exact
