@@ -118,8 +118,9 @@ def vs_base(t: np.ndarray, poses: np.ndarray, t_base: np.ndarray, p_base: np.nda
 
 
 # /kept is left out (nan) where reading the unperturbed run between the kept scans costs it more
-# than half its own error: on the simulated 1 Hz faults 0.136 m against 0.018 m (a robot that
-# turns in place at every corner), on ACES at 1 Hz 0.044 m against 0.036 m
+# than half its own error: on the simulated 1 Hz faults 0.136 m against 0.018 m (the robot turns
+# at every corner of the maze; a second of turning is no straight line), on ACES at 1 Hz 0.044 m
+# against 0.036 m
 _KEPT_MAX_READ = 1.5
 
 
