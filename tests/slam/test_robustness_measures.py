@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 from pathlib import Path
 
 import numpy as np
@@ -15,11 +16,16 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():  # type: ignore[no-untyped-def]
+    """The benchmark as a module. Imported, it must leave NUMBA_NUM_THREADS alone: numba
+    refuses a value that differs from the threads it already launched (a fresh clone's CI
+    failed 18 tests after this module set it once)."""
+    before = os.environ.get("NUMBA_NUM_THREADS")
     spec = importlib.util.spec_from_file_location(
         "bench_slam_robustness", ROOT / "benchmarks" / "bench_slam_robustness.py"
     )
     mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
     spec.loader.exec_module(mod)  # type: ignore[union-attr]
+    assert os.environ.get("NUMBA_NUM_THREADS") == before
     return mod
 
 
