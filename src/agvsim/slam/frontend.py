@@ -23,7 +23,6 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from agvsim.angles import wrap_scalar
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.fusion import OdometryFusion
 from agvsim.slam.mapping import (
@@ -335,8 +334,7 @@ class Tracker:
         turn_var = 0.0
         if self.fusion is not None and self.pose is not None:
             # odometry's heading error in proportion to the turn it predicts (learnt)
-            turn = abs(wrap_scalar(guess[2] - self.pose[2]))
-            turn_var = (self.fusion.turn_ratio * turn) ** 2
+            turn_var = self.fusion.turn_variance(guess[2] - self.pose[2])
         win_m, win_rad = self.check.windows(odom_var, cfg.window_m, cfg.window_rad, turn_var)
         # a fused odometry pulls the pose once, in the fusion, by its learnt noise; a fixed
         # prior here as well pulled matches towards a prediction several degrees off wherever

@@ -133,7 +133,7 @@ class OdometryFusion:
             if f_t > s_o:
                 s_o = f_t
             # odometry's heading error that follows the turn (learnt), on top of its floor
-            v_turn = (self.turn_ratio * abs(wrap_scalar(step[2]))) ** 2 if self.turn_gain else 0.0
+            v_turn = self.turn_variance(step[2]) if self.turn_gain else 0.0
             if f_r > s_or or v_turn > 0.0:
                 s_mr = s_or * (1.0 - k_rot) / max(k_rot, 1e-12)
                 v_r = max(f_r, s_or) + v_turn
@@ -145,6 +145,12 @@ class OdometryFusion:
         out[:2] = guess[:2] + v @ d
         out[2] = guess[2] + k_rot * wrap_scalar(match[2] - guess[2])
         return out
+
+    def turn_variance(self, turn: float) -> float:
+        """Odometry's heading variance (rad^2) from a turn of ``turn`` rad: ``(ratio * turn)^2``
+        with the ratio last learnt (:meth:`estimate_turn_ratio`; the search window and, with
+        ``turn_gain``, :meth:`fuse` add it)."""
+        return (self.turn_ratio * abs(wrap_scalar(turn))) ** 2
 
     def estimate_turn_ratio(self) -> float:
         """Odometry's heading error per radian turned (std), from the scans so far."""
