@@ -418,9 +418,10 @@ def step_robots(
     n_chunk = min(n_rob, CHUNKS)
     for c in prange(n_chunk):  # robots are independent: any split gives the same result
         mu_n = np.empty(n_w)  # mu N under each wheel
-        dirs1, dirs2 = np.empty((n_w, 4)), np.empty((n_w, 4))  # at the first stage, the end
-        y0, y1, y2, a = np.empty(3 + n_w), np.empty(3 + n_w), np.empty(3 + n_w), np.empty(3 + n_w)
-        tau1, tau2, slip = np.empty(n_w), np.empty(n_w), np.empty(n_w)
+        # per stage (the first, the second and last): wheel directions, the stage value, torques
+        dirs, ys, taus = np.empty((2, n_w, 4)), np.empty((2, 3 + n_w)), np.empty((2, n_w))
+        dirs1, dirs2, y1, y2, tau1, tau2 = dirs[0], dirs[1], ys[0], ys[1], taus[0], taus[1]
+        y0, a, slip = np.empty(3 + n_w), np.empty(3 + n_w), np.empty(n_w)
         kap = np.empty((n_w, NKAP))
         for d in range(c * n_rob // n_chunk, (c + 1) * n_rob // n_chunk):
             nw = int(body[d, B_NW])
@@ -488,19 +489,39 @@ def step_robots(
                         set_directions(wheel, d, nw, dl, body[d, B_WHEELBASE], dirs1)
                         dl, dr = servo(body, d, dl, dr, delta_target[d], h - gh)
                         set_directions(wheel, d, nw, dl, body[d, B_WHEELBASE], dirs2)
-                    a[:] = y0
-                    y1[:] = y0
-                    sig1, res1 = solve_stage(
-                        body, wheel, d, mu_n, dirs1, target, gh, a, y1, tau1, slip, kap, iterations
-                    )
-                    # second stage: a = y0 + (1 - gamma) h f(Y1), f(Y1) = (Y1 - y0) / (gamma h)
-                    for k in range(3 + nw):
-                        a[k] = y0[k] + (1.0 - GAMMA) / GAMMA * (y1[k] - y0[k])
-                    for k in range(3 + nw):  # first guess: f(Y2) = f(Y1)
-                        y2[k] = a[k] + y1[k] - y0[k]
-                    sig2, res2 = solve_stage(
-                        body, wheel, d, mu_n, dirs2, target, gh, a, y2, tau2, slip, kap, iterations
-                    )
+                    # both stages through one call site: the solver is inlined into this loop
+                    # once (twice doubled the kernel's compile time)
+                    sig1, res1, sig2, res2 = 0, 0.0, 0, 0.0
+                    for stage in range(2):
+                        if stage == 0:
+                            a[:] = y0
+                            y1[:] = y0
+                        else:
+                            # second stage: a = y0 + (1 - gamma) h f(Y1),
+                            # f(Y1) = (Y1 - y0) / (gamma h)
+                            for k in range(3 + nw):
+                                a[k] = y0[k] + (1.0 - GAMMA) / GAMMA * (y1[k] - y0[k])
+                            for k in range(3 + nw):  # first guess: f(Y2) = f(Y1)
+                                y2[k] = a[k] + y1[k] - y0[k]
+                        sig, res = solve_stage(
+                            body,
+                            wheel,
+                            d,
+                            mu_n,
+                            dirs[stage],
+                            target,
+                            gh,
+                            a,
+                            ys[stage],
+                            taus[stage],
+                            slip,
+                            kap,
+                            iterations,
+                        )
+                        if stage == 0:
+                            sig1, res1 = sig, res
+                        else:
+                            sig2, res2 = sig, res
                     # the local error's estimate: gamma h |f(Y2) - f(Y1)|, velocities in m/s
                     est = 0.0
                     for k in range(3 + nw):
