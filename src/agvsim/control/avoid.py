@@ -166,8 +166,9 @@ class ObstacleAvoidance:
         )
         if sight is not None:
             f = sight.factor(cmd, obs.true_pose, scan)
-            self._give_way(cmd, f, obs.t_s, ranges, robot_front, robot_back, walls_back)
-            cmd = cmd * sight.factor(cmd, obs.true_pose, scan)[:, None]
+            if self._give_way(cmd, f, obs.t_s, ranges, robot_front, robot_back, walls_back):
+                f = sight.factor(cmd, obs.true_pose, scan)  # for the commands it changed
+            cmd = cmd * f[:, None]
         return cmd
 
     def _give_way(
@@ -179,17 +180,18 @@ class ObstacleAvoidance:
         robot_front: np.ndarray,
         robot_back: np.ndarray,
         walls_back: np.ndarray,
-    ) -> None:
+    ) -> bool:
         """Robots that another one has held still for ``hold_s`` (two robots that block each
         other's turns) back away, forwards or backwards, whichever way has more room, for
-        ``backoff_s``; then they turn again. Writes their new commands into ``cmd``."""
+        ``backoff_s``; then they turn again. Writes their new commands into ``cmd``; True if
+        there were any."""
         wants = np.abs(cmd).max(axis=1) > 1e-6
         held = wants & (factor < 0.05)
         self.held_since[~held] = np.nan
         self.held_since[held & np.isnan(self.held_since)] = t_s
         due = held & (t_s - self.held_since >= self.hold_s)
         if not due.any():
-            return
+            return False
         r = np.where(ranges == -np.inf, 0.0, ranges)
         front = np.minimum(r[:, self.front].min(axis=1), robot_front)
         back = np.minimum(robot_back, walls_back)
@@ -201,6 +203,7 @@ class ObstacleAvoidance:
             self.back_dir[i] = 1.0 if front[i] > back[i] else -1.0
             self.held_since[i] = np.nan
             cmd[i] = (0.5 * self.speed * self.back_dir[i], 0.0, 0.0)
+        return True
 
     def state_names(self) -> list[str]:
         return [STATE_NAMES[k] for k in self.state]

@@ -256,7 +256,10 @@ class RobotSight:
         if walls_margin_m is not None:
             mask, margin = pts.hit, walls_margin_m
         k = len(poses)
-        d = np.ascontiguousarray(np.broadcast_to(np.asarray(direction_rad, np.float64), (k,)))
+        if np.ndim(direction_rad) == 0:
+            d = np.full(k, float(direction_rad))  # type: ignore[arg-type]
+        else:
+            d = np.ascontiguousarray(np.broadcast_to(np.asarray(direction_rad, np.float64), (k,)))
         out = np.empty(k)
         _free_along(pts.x_m, pts.y_m, mask, d, *self._body(k), margin, out)
         return out

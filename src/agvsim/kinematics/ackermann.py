@@ -19,7 +19,7 @@ from typing import ClassVar, Literal
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, wheel_heading
+from agvsim.kinematics.base import WheelState, as_twists, contact_heading
 from agvsim.kinematics.params import HALF_TURN, check_params, param
 
 
@@ -63,10 +63,14 @@ class Ackermann:
         t = as_twists(twist)
         r, L, l = self.wheel_radius_m, self.wheelbase_m, self.half_track_m
         vx, w = t[..., 0], t[..., 2]
-        planar = np.stack([vx, np.zeros_like(vx), w], axis=-1)
-        delta, _ = wheel_heading(L, 0.0, planar)
-        a_fl, s_fl = wheel_heading(L, l, planar)
-        a_fr, s_fr = wheel_heading(L, -l, planar)
+        # the bicycle wheel (L, 0) and the front wheels (L, l), (L, -l) in one call: a column
+        # each; vy = 0, so a point (px, py) moves at (vx - omega py, 0 + omega px)
+        lcol = np.asarray(l, dtype=np.float64)[..., None]
+        py = np.concatenate([np.zeros_like(lcol), lcol, -lcol], axis=-1)
+        wc = w[..., None]
+        angle, speed = contact_heading(vx[..., None] - wc * py, 0.0 + wc * np.asarray(L)[..., None])
+        delta, a_fl, a_fr = angle[..., 0], angle[..., 1], angle[..., 2]
+        s_fl, s_fr = speed[..., 1], speed[..., 2]
         if self.steering_geometry == "parallel":
             a_fl, a_fr = delta, delta
         speeds = np.stack([s_fl / r, s_fr / r, (vx - w * l) / r, (vx + w * l) / r], axis=-1)

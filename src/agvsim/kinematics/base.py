@@ -78,16 +78,23 @@ def wheel_heading(px: np.ndarray | float, py: np.ndarray | float, twists: np.nda
     robot frame needs for body twist(s) ``(N, 3)``. The angle is in (-pi/2, pi/2]; driving
     backwards gives a negative speed rather than a flipped wheel."""
     vx, vy, w = twists[..., 0], twists[..., 1], twists[..., 2]
-    ux = vx - w * py
-    uy = vy + w * px
+    return contact_heading(vx - w * py, vy + w * px)
+
+
+def contact_heading(ux: np.ndarray, uy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``wheel_heading`` from the wheel's contact-point velocity (ux, uy) in the robot frame
+    (several wheels at once when the arrays have a column per wheel)."""
     angle = np.arctan2(uy, ux)
     speed = np.hypot(ux, uy)
     flip = (angle > np.pi / 2) | (angle <= -np.pi / 2)
-    angle = np.where(flip, wrap_angle(angle + np.pi), angle)
-    speed = np.where(flip, -speed, speed)
+    if flip.any():  # (the common case, every wheel rolling forwards, skips both)
+        angle = np.where(flip, wrap_angle(angle + np.pi), angle)
+        speed = np.where(flip, -speed, speed)
     # no motion: keep the wheel straight
     still = (np.abs(ux) < 1e-12) & (np.abs(uy) < 1e-12)
-    return np.where(still, 0.0, angle), np.where(still, 0.0, speed)
+    if still.any():
+        angle, speed = np.where(still, 0.0, angle), np.where(still, 0.0, speed)
+    return angle, speed
 
 
 @dataclass(frozen=True)
