@@ -125,8 +125,7 @@ class OdometryFusion:
             return guess.copy()
         if self.ready() and self._count % 10 == 0:
             self._scale = self.estimate_scale()
-            self._k = self.estimate()
-            self.turn_ratio = self.estimate_turn_ratio()
+            self._k, self.turn_ratio = self._learn()
         s_o, s_m, k_rot, s_or = self._k
         if step is not None:
             f_t, f_r = self.floor_variance(step)
@@ -154,12 +153,22 @@ class OdometryFusion:
 
     def estimate_turn_ratio(self) -> float:
         """Odometry's heading error per radian turned (std), from the scans so far."""
-        n = min(len(self.matches), len(self.odoms))
-        if n < 3:
+        m, o = self._history()
+        if len(m) < 3:
             return 0.0
-        m = np.asarray(self.matches[-n:])
-        o = np.asarray(self.odoms[-n:])
         return _turn_ratio(m, o, _spread(m, o, 1, self._scale)[1])
+
+    def _learn(self) -> tuple[tuple[float, float, float, float], float]:
+        """:meth:`estimate` and :meth:`estimate_turn_ratio` together, sharing the arrays and the
+        lag-1 spread they both read."""
+        m, o = self._history()
+        v1 = _spread(m, o, 1, self._scale)
+        return self._estimate(m, o, v1), (_turn_ratio(m, o, v1[1]) if len(m) >= 3 else 0.0)
+
+    def _history(self) -> tuple[F64, F64]:
+        """The raw matches and odometry poses kept, as ``(n, 3)`` arrays of equal length."""
+        n = min(len(self.matches), len(self.odoms))
+        return np.asarray(self.matches[-n:]), np.asarray(self.odoms[-n:])
 
     def scale(self) -> float:
         """Odometry's translation scale as last estimated (1 until :meth:`ready`)."""
@@ -236,11 +245,14 @@ class OdometryFusion:
     def estimate(self) -> tuple[float, float, float, float]:
         """``(odometry translation var, match translation var, heading gain, odometry heading
         var)`` per scan, from the scans so far."""
-        n = min(len(self.matches), len(self.odoms))
-        m = np.asarray(self.matches[-n:])
-        o = np.asarray(self.odoms[-n:])
-        lag = min(self.lag, max((n - 1) // 3, 2))
-        v1 = _spread(m, o, 1, self._scale)
+        m, o = self._history()
+        return self._estimate(m, o, _spread(m, o, 1, self._scale))
+
+    def _estimate(
+        self, m: F64, o: F64, v1: tuple[float, float]
+    ) -> tuple[float, float, float, float]:
+        """:meth:`estimate` from the history ``m``, ``o`` and its lag-1 spread ``v1``."""
+        lag = min(self.lag, max((len(m) - 1) // 3, 2))
         vl = _spread(m, o, lag, self._scale)
         out = []
         for a, b, cap in zip(v1, vl, self.match_ceilings, strict=True):
