@@ -331,3 +331,32 @@ def test_keyframes_are_stored_compactly() -> None:
     np.testing.assert_allclose(first.ends, ends, rtol=0, atol=0.5 * slam.end_unit_m + 1e-5)
     with pytest.raises(ValueError, match="dropped"):
         slam.find_loop_closures(0)
+
+
+def test_the_warm_up_passes_start_from_the_turn_ratio_learnt(monkeypatch) -> None:
+    """Each pass of the warm-up presets the new fusion with what the pass before learnt: its
+    noises and its heading error per radian turned (the ratio was dropped before, so the
+    scans processed again were fused as if odometry turned exactly)."""
+    from agvsim.slam.fusion import OdometryFusion
+
+    learnt: list[float] = []
+    given: list[float] = []
+    estimate_turn_ratio, preset = OdometryFusion.estimate_turn_ratio, OdometryFusion.preset
+
+    def spy_ratio(self):  # type: ignore[no-untyped-def]
+        learnt.append(estimate_turn_ratio(self))
+        return learnt[-1]
+
+    def spy_preset(self, k, turn_ratio=0.0):  # type: ignore[no-untyped-def]
+        given.append(turn_ratio)
+        preset(self, k, turn_ratio)
+
+    monkeypatch.setattr(OdometryFusion, "estimate_turn_ratio", spy_ratio)
+    monkeypatch.setattr(OdometryFusion, "preset", spy_preset)
+    truth = loop_path(0.5)
+    rng = np.random.default_rng(3)
+    odom = drifting_odometry(truth, rng)
+    slam = GraphSlam(sensor_max_range_m=30.0)
+    for k, (pose, o) in enumerate(zip(truth, odom, strict=True)):
+        slam.update(0.1 * k, cast(pose) + rng.normal(0.0, 0.01, ANGLES.size), ANGLES, o)
+    assert len(given) >= 1 and given == learnt

@@ -166,3 +166,18 @@ def test_a_turn_weighs_the_heading_by_the_learnt_error_per_radian() -> None:
         moved = fusion.fuse(guess, match, np.eye(3), turn)[2] - guess[2]
         assert moved == pytest.approx(0.1 * 0.0401 / 0.0402 if gain else 0.05, rel=1e-9)
         assert fusion.fuse(guess, match, np.eye(3), straight)[2] - guess[2] == pytest.approx(0.05)
+
+
+def test_a_preset_carries_the_turn_ratio_into_the_fusion() -> None:
+    """The warm-up's later passes start from the noises *and* the turn ratio the pass before
+    learnt: with ``preset(noises, 0.5)`` and no scan learnt yet, a turn of 0.4 rad weighs the
+    heading as in the test above (gain 0.0401 / 0.0402); without the ratio the gain is 0.5."""
+    guess = np.array([1.0, 2.0, 0.3])
+    match = guess + np.array([0.0, 0.0, 0.1])
+    turn = np.array([0.05, 0.0, 0.4])
+    for ratio, gain in ((0.5, 0.0401 / 0.0402), (0.0, 0.5)):
+        fusion = OdometryFusion(window=300, lag=10, turn_gain=True)
+        fusion.preset((1e-4, 1e-4, 0.5, 1e-4), ratio)
+        assert not fusion.ready() and fusion.turn_ratio == ratio
+        moved = fusion.fuse(guess, match, np.eye(3), turn)[2] - guess[2]
+        assert moved == pytest.approx(0.1 * gain, rel=1e-9)

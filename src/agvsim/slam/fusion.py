@@ -209,9 +209,10 @@ class OdometryFusion:
         """Enough scans taken on the move to estimate the noises."""
         return len(self.matches) >= self.lag + 30
 
-    def preset(self, k: tuple[float, float, float, float]) -> None:
-        """Start from noises learnt earlier (see :meth:`estimate`) until enough scans come."""
-        self._k, self._preset = k, True
+    def preset(self, k: tuple[float, float, float, float], turn_ratio: float = 0.0) -> None:
+        """Start from noises (see :meth:`estimate`) and a turn ratio (:meth:`estimate_turn_ratio`)
+        learnt earlier until enough scans come."""
+        self._k, self._preset, self.turn_ratio = k, True, turn_ratio
 
     def odometry_variance(self) -> tuple[float, float] | None:
         if not (self._preset or self.ready()):

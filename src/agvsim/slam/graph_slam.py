@@ -201,11 +201,11 @@ class GraphSlam:
                     # had odometry alone, which hides part of a drifting odometry's error)
                     if fusion is None or not fusion.ready():
                         break
-                    noises = fusion.estimate()
+                    noises, turn_ratio = fusion.estimate(), fusion.estimate_turn_ratio()
                     self._reset()
                     fusion = self.tracker.fusion
                     if fusion is not None:
-                        fusion.preset(noises)
+                        fusion.preset(noises, turn_ratio)
                         for args in scans:
                             self._step(*args)
             else:
