@@ -57,3 +57,39 @@ def test_run_lists_every_video_it_wrote(tmp_path):
     listed = res.output.split("outputs in", 1)[1]
     for name in ("summary.json", "trajectory.csv", "plot.png", "run.mcap", *videos):
         assert name in listed
+
+
+def test_a_slow_first_step_is_explained_not_hidden_in_the_real_time_factor(tmp_path, monkeypatch):
+    """summary.json gives the wall time to the end of the first step (numba's kernels load
+    there, compiled on a machine's first run); when that is most of the run, ``agvsim run``
+    says so beside the real-time factor. A first step made 5.2 s slow stands in for a
+    compile (in a test numba's cache is usually warm)."""
+    import json
+    import time
+
+    from agvsim import runner
+
+    scenario = tmp_path / "room.yaml"
+    scenario.write_text(
+        ROOM.replace(
+            "sensors: [{type: camera, name: front, width_px: 32, height_px: 24}]", "sensors: []"
+        )
+    )
+    res = CliRunner().invoke(app, ["run", str(scenario), "--out", str(tmp_path / "a"), "-q"])
+    assert res.exit_code == 0, res.output
+    run = json.loads((tmp_path / "a" / "summary.json").read_text())["run"]
+    assert 0.0 < run["first_step_s"] <= run["wall_time_s"]
+
+    on_step = runner._FirstStep.on_step
+
+    def slow(self, sim):  # type: ignore[no-untyped-def]
+        if self.at is None:
+            time.sleep(5.2)
+        on_step(self, sim)
+
+    monkeypatch.setattr(runner._FirstStep, "on_step", slow)
+    res = CliRunner().invoke(app, ["run", str(scenario), "--out", str(tmp_path / "b")])
+    assert res.exit_code == 0, res.output
+    run = json.loads((tmp_path / "b" / "summary.json").read_text())["run"]
+    assert 5.2 <= run["first_step_s"] <= run["wall_time_s"]
+    assert "numba compiled the simulator's kernels" in " ".join(res.output.split())

@@ -246,7 +246,7 @@ def run(
         disable=quiet,
         transient=False,
     )
-    # before the first tick the kernels load (a first run compiles them: ~15 s, once)
+    # before the first tick the kernels load (a first run compiles them: 15-60 s, once)
     task = progress.add_task("run", total=1.0, t="preparing (first run compiles kernels)")
 
     def tick(t: float, total: float) -> None:
@@ -282,6 +282,12 @@ def run(
         f"simulated {r['simulated_time_s']:.1f} s in {r['wall_time_s']:.2f} s "
         f"(real-time factor {r['real_time_factor']:.1f}x)"
     )
+    first = r.get("first_step_s")
+    if first is not None and first > 5.0 and first > 0.3 * r["wall_time_s"]:
+        out.print(
+            f"  of which {first:.1f} s before the first step ended: numba compiled the "
+            "simulator's kernels for this machine (cached: the next run starts at once)"
+        )
     for rb in data["robots"]:
         p = rb["final_pose"]
         out.print(

@@ -38,6 +38,20 @@ if TYPE_CHECKING:
     from agvsim.online_slam import OnlineSlam
 
 
+class _FirstStep:
+    """Notes the wall clock (``time.perf_counter``) when the first step ends."""
+
+    def __init__(self) -> None:
+        self.at: float | None = None
+
+    def on_step(self, sim: Simulation) -> None:
+        if self.at is None:
+            self.at = time.perf_counter()
+
+    def close(self) -> None:
+        pass
+
+
 def run_scenario(
     scenario: str | Path | Scenario,
     out_dir: str | Path,
@@ -112,9 +126,10 @@ def _run(
     trail = Trail(sim, n_steps // 4000)
     status, error = "completed", None
     t0 = time.perf_counter()
+    first = _FirstStep()
     try:
         # in order: each sees the state the run starts from when made, then every step
-        observers = [Rows(writer), *observers, *slams, metrics, trail]
+        observers = [first, Rows(writer), *observers, *slams, metrics, trail]
         if progress is not None:
             observers.append(Progress(progress, total, n_steps))
         status = run_loop(sim, n_steps, observers, stop)
@@ -140,6 +155,9 @@ def _run(
                     "error": error,
                     "requested_duration_s": total,
                     "trajectory_rows": writer.rows,
+                    # wall seconds to the end of the first step: numba's kernels load there
+                    # (compiled on a machine's first run, then cached)
+                    "first_step_s": None if first.at is None else first.at - t0,
                 },
             )
             data["metrics"] = metrics.results()
