@@ -222,3 +222,29 @@ def test_without_a_lidar_a_behaviour_is_not_wrapped():
     goal = {"type": "goto_goal", "goal_x_m": 0.0, "goal_y_m": 0.0}
     with_lidar = build(parse_scenario(_head_on(goal), "head on"))
     assert all(isinstance(b.controller, KeepClear) for b in with_lidar.bindings)
+
+
+def test_several_room_queries_in_one_pass_give_each_query_alone():
+    """``free_m_many`` (obstacle avoidance's four questions in one kernel call) answers each
+    ``(direction, walls_margin)`` exactly as ``free_m`` asked alone: a wall east at 4 m,
+    robots north and west, two robots at once."""
+    static = StaticMap.of(walled_room(10, 10))
+    sight = RobotSight(static, "lidar", ANGLES, Footprint(0.3, 0.2))
+    poses = np.array([[5.0, 5.0, 0.0], [3.0, 4.0, 0.5]])
+    scan = np.vstack([_scan((0, 4.0), (90, 2.0), (180, 1.5)), _scan((3, 1.0), (200, 0.9))])
+    queries = [
+        (0.0, None),
+        (0.0, 0.03),
+        (math.pi, None),
+        (math.pi, 0.03),
+        (np.array([0.3, -1.0]), None),
+    ]
+    many = sight.free_m_many(poses, scan, queries)
+    assert many.shape == (5, 2)
+    for q, (direction, margin) in enumerate(queries):
+        alone = sight.free_m(poses, scan, direction, walls_margin_m=margin)
+        np.testing.assert_array_equal(many[q], alone)
+    # robot 0: nothing but the wall ahead, which counts only with a walls margin; the robot
+    # 1.5 m behind it is 1.5 - 0.3 (the tail) away when reversing
+    assert math.isinf(many[0, 0]) and many[1, 0] == pytest.approx(4.0 - 0.3)
+    assert many[2, 0] == pytest.approx(1.5 - 0.3)

@@ -136,12 +136,13 @@ class ObstacleAvoidance:
         if sight is not None:  # other robots on the lidar, as distances from the reference point
             scan = sight.robot_points(obs.true_pose, obs.ranges[sight.sensor])
             fp = sight.body
-            ahead = sight.free_m(obs.true_pose, scan, 0.0)
-            walls = sight.free_m(obs.true_pose, scan, 0.0, walls_margin_m=0.03)
+            ahead, walls, behind, walls_behind = sight.free_m_many(
+                obs.true_pose, scan, [(0.0, None), (0.0, 0.03), (np.pi, None), (np.pi, 0.03)]
+            )
             robot_front = np.minimum(ahead, walls) + fp.half_length_m + fp.offset_x_m
             tail = fp.half_length_m - fp.offset_x_m
-            robot_back = sight.free_m(obs.true_pose, scan, np.pi) + tail
-            walls_back = sight.free_m(obs.true_pose, scan, np.pi, walls_margin_m=0.03) + tail
+            robot_back = behind + tail
+            walls_back = walls_behind + tail
             blocked = ahead < sight.stop_gap_m + 0.1
         cmd = np.zeros((k, 3))
         _avoid_step(

@@ -251,17 +251,25 @@ class RobotSight:
         touches another robot; inf where none is in the way. With ``walls_margin_m``, every
         return counts (walls too) and the corridor is only that much wider than the body: what
         a single front ranger misses, such as a wall corner between two beams."""
+        return self.free_m_many(poses, ranges, [(direction_rad, walls_margin_m)])[0]
+
+    def free_m_many(
+        self,
+        poses: np.ndarray,
+        ranges: np.ndarray | ScanPoints,
+        queries: list[tuple[np.ndarray | float, float | None]],
+    ) -> np.ndarray:
+        """(Q, k): :meth:`free_m` for each ``(direction_rad, walls_margin_m)`` of ``queries``,
+        in one pass (obstacle avoidance asks four: ahead and behind, robots and walls)."""
         pts = self.robot_points(poses, ranges)
-        mask, margin = pts.moving, self.side_margin_m
-        if walls_margin_m is not None:
-            mask, margin = pts.hit, walls_margin_m
-        k = len(poses)
-        if np.ndim(direction_rad) == 0:
-            d = np.full(k, float(direction_rad))  # type: ignore[arg-type]
-        else:
-            d = np.ascontiguousarray(np.broadcast_to(np.asarray(direction_rad, np.float64), (k,)))
-        out = np.empty(k)
-        _free_along(pts.x_m, pts.y_m, mask, d, *self._body(k), margin, out)
+        k, nq = len(poses), len(queries)
+        d, margin, use_hit = np.empty((nq, k)), np.empty(nq), np.empty(nq, dtype=np.bool_)
+        for q, (direction, walls_margin_m) in enumerate(queries):
+            d[q] = direction
+            use_hit[q] = walls_margin_m is not None
+            margin[q] = self.side_margin_m if walls_margin_m is None else walls_margin_m
+        out = np.empty((nq, k))
+        _free_along(pts.x_m, pts.y_m, pts.moving, pts.hit, use_hit, d, margin, *self._body(k), out)
         return out
 
     def time_to_contact_s(
@@ -401,21 +409,25 @@ def _scan_points(
 
 
 @njit(cache=True)
-def _free_along(bx, by, mask, direction, hl, hw, off, margin, out):  # pragma: no cover - numba
-    """Room before each footprint, moved along ``direction``, meets a masked point."""
-    for i in range(bx.shape[0]):
-        ux, uy = np.cos(direction[i]), np.sin(direction[i])
-        lead = hl[i] * abs(ux) + hw[i] * abs(uy)
-        half = hl[i] * abs(uy) + hw[i] * abs(ux) + margin
-        best = np.inf
-        for j in range(bx.shape[1]):
-            if not mask[i, j]:
-                continue
-            qx, qy = bx[i, j] - off[i], by[i, j]
-            along = qx * ux + qy * uy
-            if along > 0.0 and abs(-qx * uy + qy * ux) < half:
-                best = min(best, along - lead)
-        out[i] = best
+def _free_along(bx, by, moving, hit, use_hit, direction, margin, hl, hw, off, out):
+    # pragma: no cover - numba
+    """Room before each footprint, moved along ``direction[q]``, meets a point of the mask
+    query ``q`` names (``hit`` where ``use_hit[q]``, else ``moving``), for every query."""
+    for q in range(out.shape[0]):
+        mask = hit if use_hit[q] else moving
+        for i in range(bx.shape[0]):
+            ux, uy = np.cos(direction[q, i]), np.sin(direction[q, i])
+            lead = hl[i] * abs(ux) + hw[i] * abs(uy)
+            half = hl[i] * abs(uy) + hw[i] * abs(ux) + margin[q]
+            best = np.inf
+            for j in range(bx.shape[1]):
+                if not mask[i, j]:
+                    continue
+                qx, qy = bx[i, j] - off[i], by[i, j]
+                along = qx * ux + qy * uy
+                if along > 0.0 and abs(-qx * uy + qy * ux) < half:
+                    best = min(best, along - lead)
+            out[q, i] = best
 
 
 @njit(cache=True)
