@@ -409,8 +409,9 @@ def _scan_points(
 
 
 @njit(cache=True)
-def _free_along(bx, by, moving, hit, use_hit, direction, margin, hl, hw, off, out):
-    # pragma: no cover - numba
+def _free_along(  # pragma: no cover - numba
+    bx, by, moving, hit, use_hit, direction, margin, hl, hw, off, out
+):
     """Room before each footprint, moved along ``direction[q]``, meets a point of the mask
     query ``q`` names (``hit`` where ``use_hit[q]``, else ``moving``), for every query."""
     for q in range(out.shape[0]):
