@@ -65,6 +65,13 @@ class TrackingConfig:
     submap_keyframes: int = 40  # keyframes per submap
     submap_half_size_m: float = 45.0  # live submap grid: +- this around its origin
     surface_gap_m: float = 0.5  # neighbouring returns closer than this are joined in the field
+    # long corridors beyond the scanner's reach (off by default; docs/slam.md, eleventh
+    # round): a return whose neighbours both lie farther than surface_gap_m on a line through
+    # it (a wall seen far off or edge-on) is stamped along that line, not as a bump
+    # (spread_edge_on; the segments to the neighbours turn by at most this), and one seen
+    # through an opening, between nearer returns, is not stamped (glimpses). None: every
+    # return is a bump, as on the published logs' figures
+    edge_on_turn_rad: float | None = None
     l_hit: float = 0.85
     l_miss: float = -0.4
     l_clamp: float = 4.0
@@ -140,6 +147,77 @@ def densify_surface(
     return out[:j]
 
 
+@njit(cache=True)
+def spread_edge_on(
+    ends: np.ndarray, hits: np.ndarray, max_gap_m: float, step_m: float, max_turn_rad: float
+) -> np.ndarray:
+    """Points every ``step_m`` on the wall through each *edge-on* sample: a hit whose beam
+    neighbours both returned farther than ``max_gap_m`` from it on a line through it (the
+    segments to them turn by at most ``max_turn_rad``), as on a wall seen far off or at a
+    grazing angle. The points run from the sample towards each neighbour, half way and at
+    most ``max_gap_m``.
+
+    Such a sample says where the wall is across itself, not where along it: that is where the
+    beam happened to fall, and it moves with the robot. Stamped as a bump, the samples of one
+    keyframe were where the next scans' samples, on the same beams, fitted best with the robot
+    not moved: along a corridor whose ends were out of range tracking was held on the keyframe
+    before (issue 19, a simulated hospital). Spread along the wall they still place the scan
+    across the wall and in heading, and no longer along it. (Leaving them out of matching
+    instead cost the thesis maze's runs a third to three fifths of their accuracy; both cost
+    ACES some of its: off by default, docs/slam.md.)"""
+    n = ends.shape[0]
+    cos_max = math.cos(max_turn_rad)
+    count = 0
+    for k in range(1, n - 1):
+        if hits[k - 1] and hits[k] and hits[k + 1]:
+            ga = math.hypot(ends[k, 0] - ends[k - 1, 0], ends[k, 1] - ends[k - 1, 1])
+            gb = math.hypot(ends[k + 1, 0] - ends[k, 0], ends[k + 1, 1] - ends[k, 1])
+            if ga > max_gap_m and gb > max_gap_m:
+                count += 2 * int(max_gap_m / step_m) + 2
+    out = np.empty((count, 2))
+    j = 0
+    for k in range(1, n - 1):
+        if not (hits[k - 1] and hits[k] and hits[k + 1]):
+            continue
+        ax, ay = ends[k, 0] - ends[k - 1, 0], ends[k, 1] - ends[k - 1, 1]
+        bx, by = ends[k + 1, 0] - ends[k, 0], ends[k + 1, 1] - ends[k, 1]
+        ga, gb = math.hypot(ax, ay), math.hypot(bx, by)
+        if ga <= max_gap_m or gb <= max_gap_m or (ax * bx + ay * by) < cos_max * ga * gb:
+            continue
+        for dx, dy, g in ((-ax, -ay, ga), (bx, by, gb)):
+            reach = min(0.5 * g, max_gap_m)
+            m = int(reach / step_m)
+            for i in range(1, m + 1):
+                f = i * step_m / g
+                out[j, 0], out[j, 1] = ends[k, 0] + f * dx, ends[k, 1] + f * dy
+                j += 1
+    return out[:j]
+
+
+@njit(cache=True)
+def glimpses(
+    ends: np.ndarray, hits: np.ndarray, origin: np.ndarray, max_gap_m: float
+) -> np.ndarray:
+    """(n,) True for the hits seen through an opening: both beam neighbours returned, nearer
+    to ``origin`` (the sensor) and farther than ``max_gap_m`` from it, as a back wall glimpsed
+    through a door between its jambs. Which way that wall runs, one sample cannot say, so it
+    cannot be spread (:func:`spread_edge_on`); stamped as a bump it held tracking like an
+    edge-on sample does."""
+    n = ends.shape[0]
+    out = np.zeros(n, dtype=np.bool_)
+    for k in range(1, n - 1):
+        if not (hits[k - 1] and hits[k] and hits[k + 1]):
+            continue
+        r = math.hypot(ends[k, 0] - origin[0], ends[k, 1] - origin[1])
+        behind = True
+        for j in (k - 1, k + 1):
+            gap = math.hypot(ends[j, 0] - ends[k, 0], ends[j, 1] - ends[k, 1])
+            if gap <= max_gap_m or math.hypot(ends[j, 0] - origin[0], ends[j, 1] - origin[1]) >= r:
+                behind = False
+        out[k] = behind
+    return out
+
+
 @dataclass
 class Submap:
     """A rigid local map; ``origin`` is its frame in the local tracking frame."""
@@ -177,7 +255,10 @@ class Submap:
     def insert(
         self, cfg: TrackingConfig, sensor_xy: F64, ends: F64, hits: NDArray[np.bool_], node: int
     ) -> None:
-        """Ray-update the log-odds grid and stamp the hits into the live field (local frame)."""
+        """Ray-update the log-odds grid and stamp the hits into the live field (local frame),
+        neighbouring ones joined (:func:`densify_surface`); with ``edge_on_turn_rad``, edge-on
+        ones spread along their wall (:func:`spread_edge_on`) and glimpses through an opening
+        left out (:func:`glimpses`)."""
         res = cfg.resolution_m
         update_log_odds(
             self.logodds,
@@ -195,6 +276,15 @@ class Submap:
         pts = ends[hits]
         if cfg.surface_gap_m > 0:
             pts = densify_surface(ends, hits, cfg.surface_gap_m, 0.5 * res)
+            if cfg.edge_on_turn_rad is not None:
+                sensor = np.asarray(sensor_xy, np.float64).reshape(2)
+                behind = glimpses(ends, hits, sensor, cfg.surface_gap_m)
+                if behind.any():
+                    pts = densify_surface(ends, hits & ~behind, cfg.surface_gap_m, 0.5 * res)
+                spread = spread_edge_on(
+                    ends, hits, cfg.surface_gap_m, 0.5 * res, cfg.edge_on_turn_rad
+                )
+                pts = np.concatenate((pts, spread))
         stamp_points(self.likelihood, self.ox, self.oy, res, pts, self.kernel)
         self.nodes.append(node)
 
