@@ -162,3 +162,31 @@ def test_online_slam_map_is_recorded_at_the_end_of_a_run(tmp_path):
         (cells[pgm == 254] >= 0) & (cells[pgm == 254] <= 20)
     )
     assert (pgm == 0).sum() > 50  # walls were seen
+
+
+def test_slam_command_long_corridors_maps_with_edge_on_samples_spread(
+    recording, tmp_path, monkeypatch
+):
+    from typer.testing import CliRunner
+
+    from agvsim.cli import app
+    from agvsim.slam import offline
+
+    seen = []
+    real = offline.run_offline
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("config"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(offline, "run_offline", spy)
+    path, _, _ = recording
+    args = ["slam", str(path), "--robot", "mapper", "--quiet"]
+    for flag in ([], ["--long-corridors"]):
+        out = tmp_path / f"m{len(flag)}"
+        ok = CliRunner().invoke(app, [*args, "--out", str(out), *flag])
+        assert ok.exit_code == 0, ok.output
+        assert np.loadtxt(out / "trajectory.txt").shape == (31, 4)
+    assert seen[0] is None  # the defaults
+    assert seen[1].tracking.edge_on_turn_rad == pytest.approx(np.radians(15.0))
+    assert seen[1].loop == offline.SlamConfig().loop  # nothing else changed

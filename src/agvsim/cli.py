@@ -521,6 +521,15 @@ def slam(
         str | None,
         typer.Option(help="Mapping a run.mcap: that robot's lidar (default: its first)."),
     ] = None,
+    long_corridors: Annotated[
+        bool,
+        typer.Option(
+            "--long-corridors",
+            help="Mapping: corridors that run beyond the scanner's reach (a hospital, long "
+            "halls): spread edge-on wall samples along their wall, leave glimpses through "
+            "doors out (docs/slam.md; off: the published figures' setting).",
+        ),
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """2-D graph SLAM: map a laser log (writes trajectory.txt, map.pgm/.yaml/.png to --out),
@@ -542,7 +551,15 @@ def slam(
             return
         if files:
             raise SlamCommandError(f"mapping takes one log; got extra arguments {files}")
-        _slam_log(Path(target), out_dir or Path("runs/slam"), max_scans, quiet, robot, sensor)
+        _slam_log(
+            Path(target),
+            out_dir or Path("runs/slam"),
+            max_scans,
+            quiet,
+            robot,
+            sensor,
+            long_corridors,
+        )
     except SlamCommandError as e:
         _fail("error", e)
         raise typer.Exit(2) from None
@@ -555,9 +572,11 @@ def _slam_log(
     quiet: bool,
     robot: str | None = None,
     sensor: str | None = None,
+    long_corridors: bool = False,
 ) -> None:
     from agvsim.record.scan_log import open_scan_log
     from agvsim.slam.carmen import CarmenFormatError
+    from agvsim.slam.graph_slam import SlamConfig
     from agvsim.slam.offline import run_offline
 
     if not log.is_file():
@@ -577,6 +596,7 @@ def _slam_log(
             result = run_offline(
                 open_scan_log(log, robot, sensor),
                 out_dir,
+                config=SlamConfig.long_corridors() if long_corridors else None,
                 max_scans=max_scans,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
             )

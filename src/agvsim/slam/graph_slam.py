@@ -89,6 +89,15 @@ class SlamConfig:
     optimize_every: int = 50  # keyframes at least between two optimisations of small closures
     global_relocalisation: bool = True  # search every finished submap when tracking is lost
 
+    @classmethod
+    def long_corridors(cls) -> SlamConfig:
+        """The defaults, but edge-on wall samples spread along their wall and glimpses
+        through doors left out of the live field (``tracking.edge_on_turn_rad``): for
+        corridors that run beyond the scanner's reach, where their bumps held tracking on its
+        keyframes. It costs ACES a tenth of its accuracy, so it is not the default
+        (docs/slam.md, eleventh round; ``agvsim slam --long-corridors``)."""
+        return cls(tracking=TrackingConfig(edge_on_turn_rad=math.radians(15.0)))
+
 
 def _information(sigma_m: float, sigma_rad: float) -> F64:
     return np.diag([sigma_m**-2, sigma_m**-2, sigma_rad**-2])
