@@ -6,7 +6,6 @@ spread along the wall instead."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -30,16 +29,16 @@ def _wall_scan() -> tuple[np.ndarray, np.ndarray]:
     return ends, hits
 
 
-def _spread(ends: np.ndarray, hits: np.ndarray, gap: float) -> np.ndarray:
-    return spread_edge_on(ends, hits, gap, 0.025, math.radians(15.0))
+def _spread(ends: np.ndarray, hits: np.ndarray, gap: float, reach: float = 0.5) -> np.ndarray:
+    return spread_edge_on(ends, hits, gap, 0.025, math.radians(15.0), reach)
 
 
 def test_the_far_samples_of_a_wall_are_spread_along_it_and_the_near_ones_left() -> None:
     # hand-worked: x = 1.25 / tan(deg); 11 deg and 12 deg lie 6.431 and 5.881 m off (0.550 m
     # apart), 12 and 13 deg 0.467 m apart: from 12 deg on, a neighbour is within 0.5 m (joined
     # by densify_surface); 4 to 11 deg (17.876 ... 6.431 m) have both neighbours farther, on
-    # the wall's line, and are spread half way to each, at most 0.5 m. 3 deg (23.85 m) has no
-    # return beyond it: left alone
+    # the wall's line, and are spread half way to each, here at most 0.5 m. 3 deg (23.85 m)
+    # has no return beyond it: left alone
     ends, hits = _wall_scan()
     assert not hits[0] and hits[1:].all()
     pts = _spread(ends, hits, 0.5)
@@ -58,6 +57,11 @@ def test_the_far_samples_of_a_wall_are_spread_along_it_and_the_near_ones_left() 
     assert np.abs(off).max() <= 0.5 + 1e-9
     assert pts[:, 0].min() >= x[deg == 11][0] - 0.275 - 1e-9
     assert pts[:, 0].max() <= x[deg == 4][0] + 0.5 + 1e-9
+    # with a reach of 0.3 m: within 0.3 m of the samples, every sample still spread
+    short = _spread(ends, hits, 0.5, 0.3)
+    assert np.abs(short[:, 0][:, None] - x[None, src]).min(axis=1).max() <= 0.3 + 1e-9
+    near = np.abs(short[:, None, 0] - x[None, src]).argmin(axis=1)
+    assert len(short) < len(pts) and set(near.tolist()) == set(range(8))
 
 
 def test_a_post_and_a_corner_are_not_spread() -> None:
@@ -146,10 +150,8 @@ def test_a_corridor_beyond_the_range_does_not_hold_tracking_back() -> None:
     # walls a sample at a time through the doors. Stamped as bumps (the default, as on the
     # published logs' figures), those samples hold every scan on the keyframe before, and
     # tracking never leaves the start: 24 m behind. Spread along their walls, the glimpses
-    # left out (edge_on_turn_rad), it ends within a metre (measured 0.63 m behind)
-    cfg = SlamConfig()
-    on = dataclasses.replace(
-        cfg, tracking=dataclasses.replace(cfg.tracking, edge_on_turn_rad=math.radians(15.0))
-    )
-    assert abs(_drive(on)) < 1.0
-    assert _drive(cfg) < -10.0
+    # left out (SlamConfig.long_corridors()), it ends within a metre (measured 0.63 m
+    # behind); spread 0.3 m each way instead of 0.5, 1.9 m behind, and 0.2 m (no farther than
+    # the next keyframe) still 24 m: the spread's end holds a scan as a bump did
+    assert abs(_drive(SlamConfig.long_corridors())) < 1.0
+    assert _drive(SlamConfig()) < -10.0
