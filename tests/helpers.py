@@ -28,6 +28,22 @@ def walled_room(rows: int, cols: int) -> OccupancyGrid:
     return OccupancyGrid.from_matrix(m, 1.0, (0.0, 0.0))
 
 
+def cast_segments(pose: np.ndarray, walls: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Ranges of beams at ``angles`` (laser frame) from ``pose`` to the nearest of the wall
+    segments ``walls`` (k, 4: x0, y0, x1, y1); inf where a beam meets none (exact geometry,
+    for scans of hand-made rooms)."""
+    th = pose[2] + angles
+    d = np.stack([np.cos(th), np.sin(th)], axis=1)[:, None, :]
+    p, e = walls[None, :, :2], walls[None, :, 2:] - walls[None, :, :2]
+    w = p - pose[:2]
+    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
+        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / den
+    t = np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
+    return t.min(axis=1)
+
+
 def need_browser() -> None:
     """Skip the test without Debian's chromium and playwright; fail it instead when
     AGVSIM_REQUIRE_BROWSER=1 (CI sets it)."""

@@ -14,6 +14,8 @@ from agvsim.slam.frontend import glimpses, spread_edge_on
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.se2 import between, compose
 
+from helpers import cast_segments
+
 ANGLES = np.radians(np.arange(-90.0, 91.0, 1.0))  # 181 beams, 1 deg: a front scanner
 RANGE_M = 30.0
 
@@ -113,16 +115,7 @@ def _corridor() -> np.ndarray:
 
 
 def _cast(pose: np.ndarray, walls: np.ndarray) -> np.ndarray:
-    th = pose[2] + ANGLES
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)[:, None, :]
-    p, e = walls[None, :, :2], walls[None, :, 2:] - walls[None, :, :2]
-    w = p - pose[:2]
-    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
-        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / den
-    t = np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
-    r = t.min(axis=1)
+    r = cast_segments(pose, walls, ANGLES)
     return np.where(r <= RANGE_M, r, np.inf)
 
 

@@ -18,6 +18,8 @@ from agvsim.slam.loop_closure import LoopClosure, LoopConfig, LoopDetector
 from agvsim.slam.offline import run_offline, write_trajectory
 from agvsim.slam.se2 import between, compose
 
+from helpers import cast_segments
+
 ANGLES = np.radians(np.arange(-90.0, 90.0, 1.0))
 # a 12 m x 9 m hall around a 6 m x 3 m block, niches and boxes so no stretch looks the same
 HALL = np.array(
@@ -46,16 +48,7 @@ HALL = np.array(
 
 def cast(pose: np.ndarray, walls: np.ndarray = HALL, angles: np.ndarray = ANGLES) -> np.ndarray:
     """Ranges of the beams from ``pose`` to the nearest wall segment (inf: no hit)."""
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)[:, None, :]
-    p, e = walls[None, :, :2], walls[None, :, 2:] - walls[None, :, :2]
-    w = p - pose[:2]
-    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
-        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / den
-    t = np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
-    return t.min(axis=1)
+    return cast_segments(pose, walls, angles)
 
 
 def loop_path(laps: float, step_m: float = 0.1) -> np.ndarray:

@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.mapping import likelihood_field
 
+from helpers import cast_segments
+
 RES = 0.05
 ANGLES = np.radians(np.arange(-90.0, 90.0, 1.0))
 # an asymmetric 10 m x 8 m room with a pillar, a cupboard and a slanted wall (x0, y0, x1, y1)
@@ -36,17 +38,7 @@ WALLS = np.array(
 
 def cast(pose: np.ndarray, walls: np.ndarray = WALLS, angles: np.ndarray = ANGLES) -> np.ndarray:
     """Ranges of beams from ``pose`` to the nearest wall segment (inf: no hit)."""
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)[:, None, :]  # (n, 1, 2)
-    p, q = walls[None, :, :2], walls[None, :, 2:]
-    e = q - p
-    w = p - pose[:2]
-    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
-        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / den
-    t = np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
-    return t.min(axis=1)
+    return cast_segments(pose, walls, angles)
 
 
 def points(ranges: np.ndarray) -> np.ndarray:
