@@ -174,3 +174,20 @@ def test_browser_session_runs_slam_and_serves_its_live_map():
     s.reset()
     assert s.slam_map("r1") is None  # a new run, a new SLAM
     assert s.slam_map("nobody") is None
+
+
+def test_slam_block_long_corridors_reaches_the_tracking(tmp_path):
+    from agvsim.online_slam import OnlineSlam
+    from agvsim.scenario import build
+
+    for flag, want in ((False, None), (True, np.radians(15.0))):
+        sc = parse_scenario(_scenario(sensor="lidar", long_corridors=flag, resolution_m=0.1), "t")
+        sim = build(sc)
+        slam = OnlineSlam(sim, 0, sc.robots[0].slam)
+        tracking = slam.slam.cfg.tracking
+        assert tracking.edge_on_turn_rad == (pytest.approx(want) if want else None)
+        assert tracking.resolution_m == 0.1  # the block's other keys still apply
+    # and a run with it writes its map
+    sc = parse_scenario(_scenario(sensor="lidar", long_corridors=True), "t")
+    data = run_scenario(sc, tmp_path, duration_s=10, plot=False)
+    assert data["slam"]["r1"]["scans"] == 101 and (tmp_path / "slam_r1" / "map.png").is_file()

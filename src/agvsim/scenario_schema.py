@@ -315,6 +315,11 @@ class SlamBlock(StrictConfig):
     map_period_s: float = Field(
         default=1.0, gt=0, description="how often the live map is redrawn (browser app overlay)"
     )
+    long_corridors: bool = Field(
+        default=False,
+        description="corridors beyond the lidar's reach: far wall samples spread along their "
+        "wall (agvsim slam --long-corridors; docs/slam.md)",
+    )
 
 
 class _RobotBase(StrictConfig):
