@@ -332,19 +332,22 @@ def test_the_warm_up_passes_start_from_the_turn_ratio_learnt(monkeypatch) -> Non
     scans processed again were fused as if odometry turned exactly)."""
     from agvsim.slam.fusion import OdometryFusion
 
-    learnt: list[float] = []
+    learnt: list[float] = []  # the ratio the fusion last learnt, when each preset came
     given: list[float] = []
-    estimate_turn_ratio, preset = OdometryFusion.estimate_turn_ratio, OdometryFusion.preset
+    latest = [float("nan")]
+    learn, preset = OdometryFusion.learn, OdometryFusion.preset
 
-    def spy_ratio(self):  # type: ignore[no-untyped-def]
-        learnt.append(estimate_turn_ratio(self))
-        return learnt[-1]
+    def spy_learn(self):  # type: ignore[no-untyped-def]
+        out = learn(self)
+        latest[0] = out[1]
+        return out
 
     def spy_preset(self, k, turn_ratio=0.0):  # type: ignore[no-untyped-def]
+        learnt.append(latest[0])
         given.append(turn_ratio)
         preset(self, k, turn_ratio)
 
-    monkeypatch.setattr(OdometryFusion, "estimate_turn_ratio", spy_ratio)
+    monkeypatch.setattr(OdometryFusion, "learn", spy_learn)
     monkeypatch.setattr(OdometryFusion, "preset", spy_preset)
     truth = loop_path(0.5)
     rng = np.random.default_rng(3)

@@ -284,12 +284,12 @@ class Submap:
         )
         pts = ends[hits]
         if cfg.surface_gap_m > 0:
-            pts = densify_surface(ends, hits, cfg.surface_gap_m, 0.5 * res)
+            stamp = hits
             if cfg.edge_on_turn_rad is not None:
                 sensor = np.asarray(sensor_xy, np.float64).reshape(2)
-                behind = glimpses(ends, hits, sensor, cfg.surface_gap_m)
-                if behind.any():
-                    pts = densify_surface(ends, hits & ~behind, cfg.surface_gap_m, 0.5 * res)
+                stamp = hits & ~glimpses(ends, hits, sensor, cfg.surface_gap_m)
+            pts = densify_surface(ends, stamp, cfg.surface_gap_m, 0.5 * res)
+            if cfg.edge_on_turn_rad is not None:
                 spread = spread_edge_on(
                     ends,
                     hits,

@@ -125,7 +125,7 @@ class OdometryFusion:
             return guess.copy()
         if self.ready() and self._count % 10 == 0:
             self._scale = self.estimate_scale()
-            self._k, self.turn_ratio = self._learn()
+            self._k, self.turn_ratio = self.learn()
         s_o, s_m, k_rot, s_or = self._k
         if step is not None:
             f_t, f_r = self.floor_variance(step)
@@ -158,9 +158,9 @@ class OdometryFusion:
             return 0.0
         return _turn_ratio(m, o, _spread(m, o, 1, self._scale)[1])
 
-    def _learn(self) -> tuple[tuple[float, float, float, float], float]:
-        """:meth:`estimate` and :meth:`estimate_turn_ratio` together, sharing the arrays and the
-        lag-1 spread they both read."""
+    def learn(self) -> tuple[tuple[float, float, float, float], float]:
+        """:meth:`estimate` and :meth:`estimate_turn_ratio` together (noises, turn ratio),
+        sharing the arrays and the lag-1 spread they both read."""
         m, o = self._history()
         v1 = _spread(m, o, 1, self._scale)
         return self._estimate(m, o, v1), (_turn_ratio(m, o, v1[1]) if len(m) >= 3 else 0.0)

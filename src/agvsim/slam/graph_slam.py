@@ -210,7 +210,7 @@ class GraphSlam:
                     # had odometry alone, which hides part of a drifting odometry's error)
                     if fusion is None or not fusion.ready():
                         break
-                    noises, turn_ratio = fusion.estimate(), fusion.estimate_turn_ratio()
+                    noises, turn_ratio = fusion.learn()
                     self._reset()
                     fusion = self.tracker.fusion
                     if fusion is not None:
