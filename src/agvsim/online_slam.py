@@ -14,6 +14,7 @@ map over the true walls, with the true, SLAM and odometry paths).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,9 +55,8 @@ class OnlineSlam:
         self.angles = np.asarray(spec.beam_angles_rad, np.float64)
         mount = (spec.mount_xy_m[0], spec.mount_xy_m[1], spec.mount_yaw_rad)
         base = SlamConfig.long_corridors() if cfg.long_corridors else SlamConfig()
-        tracking = base.tracking
         config = SlamConfig(
-            tracking=type(tracking)(**{**vars(tracking), "resolution_m": cfg.resolution_m}),
+            tracking=dataclasses.replace(base.tracking, resolution_m=cfg.resolution_m),
             loop=LoopConfig(min_score=cfg.loop_min_score, search_radius_m=cfg.loop_search_radius_m),
             max_range_m=cfg.max_range_m,
         )
