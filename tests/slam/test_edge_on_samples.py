@@ -6,6 +6,7 @@ spread along the wall instead."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -123,6 +124,12 @@ def _drive(cfg: SlamConfig) -> float:
     """Drive 24 m east along the corridor at 6 cm a scan (odometry with 0.2 mm of noise a
     scan); returns how far the SLAM pose ends behind (-) or ahead (+) of the truth along the
     corridor."""
+    slam, end_x = _run(cfg)
+    return float(slam.trajectory()[1][-1, 0] - end_x)
+
+
+def _run(cfg: SlamConfig) -> tuple[GraphSlam, float]:
+    """:func:`_drive`'s SLAM, finished, and the true end's x."""
     walls = _corridor()
     rng = np.random.default_rng(3)
     truth = np.array([[-26.0 + 0.06 * k, 0.0, 0.0] for k in range(401)])
@@ -135,7 +142,7 @@ def _drive(cfg: SlamConfig) -> float:
         ranges = _cast(pose, walls) + rng.normal(0.0, 0.01, ANGLES.size)
         slam.update(0.1 * k, ranges, ANGLES, o)
     slam.finish()
-    return float(slam.trajectory()[1][-1, 0] - truth[-1, 0])
+    return slam, float(truth[-1, 0])
 
 
 def test_a_corridor_beyond_the_range_does_not_hold_tracking_back() -> None:
@@ -148,3 +155,19 @@ def test_a_corridor_beyond_the_range_does_not_hold_tracking_back() -> None:
     # the next keyframe) still 24 m: the spread's end holds a scan as a bump did
     assert abs(_drive(SlamConfig.long_corridors())) < 1.0
     assert _drive(SlamConfig()) < -10.0
+
+
+def test_keyframes_in_the_corridor_are_tied_to_their_submaps_softly_along_it() -> None:
+    # the local-SLAM edges take their shape from the keyframe's match
+    # (graph_slam.local_information): in the corridor the walls place a keyframe across it
+    # (keyframe y: 1 / (2 cm)^2) and barely along it, so along it (keyframe x) the edge is
+    # floored at 5 % of that; with the floor at 1 they are round, as before
+    for floor, along in ((0.05, (124.9, 750.0)), (1.0, (2499.9, 2500.1))):
+        slam, _ = _run(dataclasses.replace(SlamConfig.long_corridors(), local_weak_floor=floor))
+        g, subs = slam.graph, set(slam.submap_var)
+        tie = np.isin(g.edge_i, list(subs)) & np.isin(g.edge_j, slam.node_var)
+        info = g.information[tie]
+        assert tie.sum() > 100
+        np.testing.assert_allclose(np.linalg.eigvalsh(info[:, :2, :2])[:, 1], 2500.0, rtol=1e-9)
+        xx = np.median(info[:, 0, 0])
+        assert along[0] <= xx <= along[1], xx

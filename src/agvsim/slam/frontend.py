@@ -389,6 +389,9 @@ class Tracker:
         # the last scan was lost and fit under lost_score, best outside the narrow window
         self.unmatched = False
         self._lost = 0
+        # J^T J of the last scan's match (local frame; :func:`~.scan_matching.match_hessian`),
+        # None when it was not matched: how sharply the scan placed itself, per direction
+        self.hessian: F64 | None = None
 
     def predict(self, odom_pose: F64) -> list[F64]:
         """Predictions of the scan's pose, scan to scan ``x_prev * (o_prev^-1 * o_now)`` first,
@@ -424,6 +427,7 @@ class Tracker:
         angular search step."""
         guess = guesses[0]
         self.doubted = self.odom_suspect = self.unmatched = False
+        self.hessian = None
         if not self.active:
             return guess, 0.0
         s, cfg = self.active[0], self.cfg
@@ -521,11 +525,10 @@ class Tracker:
         match_var = None if self.fusion is None else self.fusion.match_variance()
         self.doubted = self.check.disagrees(guess, pose, score, at_guess, odom_var, match_var)
         self.odom_suspect |= self.doubted
+        self.hessian = sm.match_hessian(s.likelihood, s.ox, s.oy, res, points, pose)
         if self.fusion is not None and not self.doubted:
             step = between(self.pose, guess) if self.pose is not None else None
-            pose = self.fusion.fuse(
-                guess, pose, sm.match_hessian(s.likelihood, s.ox, s.oy, res, points, pose), step
-            )
+            pose = self.fusion.fuse(guess, pose, self.hessian, step)
         return pose, score
 
     def _relocalise(
@@ -562,6 +565,7 @@ class Tracker:
         self.pose = np.asarray(pose, np.float64).copy()
         self.check = OdometryCheck(self.cfg.doubt)
         self.lost, self._lost, self.poor, self.unmatched = False, 0, 0, False
+        self.hessian = None  # the match was of the place it was lost at
         self.n_relocalised += 1
         return done
 

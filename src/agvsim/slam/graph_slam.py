@@ -79,6 +79,10 @@ class SlamConfig:
     keyframe_time_s: float = 10.0
     sigma_local_m: float = 0.02  # std of a local-SLAM relative pose (keyframe chain, submaps)
     sigma_local_rad: float = math.radians(0.5)
+    # ... along its best-placed direction: the keyframe's match shapes the rest, its weakest
+    # direction's information floored at this fraction (local_information; a keyframe in a
+    # corridor is placed along it by odometry, not by the walls). 1: round, as before
+    local_weak_floor: float = 0.05
     huber_scale: float = 3.0  # in standard deviations
     switchable_loops: bool = True  # loop closures as switchable constraints (else Huber)
     switch_scale: float = 3.0  # closures within this many std keep their full weight
@@ -101,6 +105,30 @@ class SlamConfig:
 
 def _information(sigma_m: float, sigma_rad: float) -> F64:
     return np.diag([sigma_m**-2, sigma_m**-2, sigma_rad**-2])
+
+
+def local_information(
+    hess: F64 | None, heading: float, sigma_m: float, sigma_rad: float, floor: float
+) -> F64:
+    """Information (3, 3) of a local-SLAM edge into a keyframe at local ``heading`` (the edge
+    error is in the keyframe's frame) from its match's ``J^T J`` ``hess`` (local frame): std
+    ``sigma_m`` along the best-placed direction, ``sigma_m / sqrt(max(l / l_max, floor))``
+    along the other (``l`` the eigenvalues of the translation block), ``sigma_rad`` in
+    heading. Along a corridor whose ends are out of reach the walls do not place a scan, and
+    a round 2 cm edge there held a tracking slip of a metre against the loop closures that
+    would have mended it (ACES, docs/slam-history.md). ``hess`` None, or no gradient: round."""
+    info = _information(sigma_m, sigma_rad)
+    if hess is None or floor >= 1.0:
+        return info
+    c, s = math.cos(heading), math.sin(heading)
+    rot = np.array([[c, s], [-s, c]])  # local -> keyframe frame: R^T
+    h = rot @ np.asarray(hess, np.float64)[:2, :2] @ rot.T
+    w, v = np.linalg.eigh(h)
+    if not w[-1] > 0.0:
+        return info
+    w = np.maximum(w / w[-1], floor) / sigma_m**2
+    info[:2, :2] = (v * w) @ v.T
+    return info
 
 
 @dataclass
@@ -180,7 +208,6 @@ class GraphSlam:
         self._loops_optimised = 0  # closures in the graph at the last optimisation
         self.switches = np.zeros(0)  # switch of every loop closure at the last optimisation
         self._last_optimised_node = 0
-        self._info_local = _information(cfg.sigma_local_m, cfg.sigma_local_rad)
         self._scan_at_keyframe = 0
         self._odom = np.zeros(3)  # odometry pose of the scan being processed
         self._odom_doubted = False  # a scan since the last keyframe refuted odometry
@@ -313,11 +340,17 @@ class GraphSlam:
         self.keyframes.append(kf)
         var = self.graph.add_node(compose(self._global_from_local, pose))
         self.node_var.append(var)
+        cfg = self.cfg
+        info_local = local_information(
+            self.tracker.hessian,
+            pose[2],
+            cfg.sigma_local_m,
+            cfg.sigma_local_rad,
+            cfg.local_weak_floor,
+        )
         if node > 0 and self._relocated is None:  # no chain edge across a relocalisation
             prev = self.keyframes[node - 1]
-            self.graph.add_edge(
-                self.node_var[node - 1], var, between(prev.local, pose), self._info_local
-            )
+            self.graph.add_edge(self.node_var[node - 1], var, between(prev.local, pose), info_local)
             noise = self.tracker.odometry_variance()
             # no odometry edge across a stretch where scan matching refuted odometry (a
             # freeze, a jump, a slip): it would pull against the local-SLAM edge
@@ -337,9 +370,7 @@ class GraphSlam:
             self.submap_var.append(self.graph.add_node(compose(self._global_from_local, s.origin)))
         owners = [s for s in self.tracker.submaps[-3:] if s.nodes and s.nodes[-1] == node]
         for s in owners:
-            self.graph.add_edge(
-                self.submap_var[s.index], var, between(s.origin, pose), self._info_local
-            )
+            self.graph.add_edge(self.submap_var[s.index], var, between(s.origin, pose), info_local)
         kf.submap = min(s.index for s in owners)
         if node >= len(self._homes):
             grow = max(node, 64)
