@@ -180,14 +180,15 @@ def test_slam_block_long_corridors_reaches_the_tracking(tmp_path):
     from agvsim.online_slam import OnlineSlam
     from agvsim.scenario import build
 
-    for flag, want in ((False, None), (True, np.radians(15.0))):
-        sc = parse_scenario(_scenario(sensor="lidar", long_corridors=flag, resolution_m=0.1), "t")
+    for flag, want in ((False, None), (True, np.radians(15.0)), (None, np.radians(15.0))):
+        keys = {} if flag is None else {"long_corridors": flag}  # None: the key left out
+        sc = parse_scenario(_scenario(sensor="lidar", resolution_m=0.1, **keys), "t")
         sim = build(sc)
         slam = OnlineSlam(sim, 0, sc.robots[0].slam)
         tracking = slam.slam.cfg.tracking
         assert tracking.edge_on_turn_rad == (pytest.approx(want) if want else None)
         assert tracking.resolution_m == 0.1  # the block's other keys still apply
     # and a run with it writes its map
-    sc = parse_scenario(_scenario(sensor="lidar", long_corridors=True), "t")
+    sc = parse_scenario(_scenario(sensor="lidar", long_corridors=False), "t")
     data = run_scenario(sc, tmp_path, duration_s=10, plot=False)
     assert data["slam"]["r1"]["scans"] == 101 and (tmp_path / "slam_r1" / "map.png").is_file()

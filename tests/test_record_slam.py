@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
@@ -164,9 +165,7 @@ def test_online_slam_map_is_recorded_at_the_end_of_a_run(tmp_path):
     assert (pgm == 0).sum() > 50  # walls were seen
 
 
-def test_slam_command_long_corridors_maps_with_edge_on_samples_spread(
-    recording, tmp_path, monkeypatch
-):
+def test_slam_command_point_samples_maps_with_every_return_a_bump(recording, tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
     from agvsim.cli import app
@@ -182,11 +181,17 @@ def test_slam_command_long_corridors_maps_with_edge_on_samples_spread(
     monkeypatch.setattr(offline, "run_offline", spy)
     path, _, _ = recording
     args = ["slam", str(path), "--robot", "mapper", "--quiet"]
-    for flag in ([], ["--long-corridors"]):
-        out = tmp_path / f"m{len(flag)}"
+    for k, flag in enumerate(([], ["--long-corridors"], ["--point-samples"])):
+        out = tmp_path / f"m{k}"
         ok = CliRunner().invoke(app, [*args, "--out", str(out), *flag])
         assert ok.exit_code == 0, ok.output
         assert np.loadtxt(out / "trajectory.txt").shape == (31, 4)
-    assert seen[0] is None  # the defaults
-    assert seen[1].tracking.edge_on_turn_rad == pytest.approx(np.radians(15.0))
-    assert seen[1].loop == offline.SlamConfig().loop  # nothing else changed
+    # the defaults spread edge-on samples; --long-corridors (the eleventh round's flag) is
+    # the default's name, --point-samples the published figures' setting
+    assert seen[0] is None and seen[1] is None
+    assert offline.SlamConfig().tracking.edge_on_turn_rad == pytest.approx(np.radians(15.0))
+    assert seen[2].tracking.edge_on_turn_rad is None
+    assert seen[2].loop == offline.SlamConfig().loop  # nothing else changed
+    assert dataclasses.replace(seen[2].tracking, edge_on_turn_rad=np.radians(15.0)) == (
+        offline.SlamConfig().tracking
+    )

@@ -524,12 +524,13 @@ def slam(
     long_corridors: Annotated[
         bool,
         typer.Option(
-            "--long-corridors",
-            help="Mapping: corridors that run beyond the scanner's reach (a hospital, long "
-            "halls): spread edge-on wall samples along their wall, leave glimpses through "
-            "doors out (docs/slam.md; off: the published figures' setting).",
+            "--long-corridors/--point-samples",
+            help="Mapping: spread far, edge-on wall samples along their wall and leave "
+            "glimpses through doors out of the live map, so corridors that run beyond the "
+            "scanner's reach do not hold tracking back (the default); --point-samples: every "
+            "return a bump, the published figures' setting (docs/slam.md).",
         ),
-    ] = False,
+    ] = True,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """2-D graph SLAM: map a laser log (writes trajectory.txt, map.pgm/.yaml/.png to --out),
@@ -572,7 +573,7 @@ def _slam_log(
     quiet: bool,
     robot: str | None = None,
     sensor: str | None = None,
-    long_corridors: bool = False,
+    long_corridors: bool = True,
 ) -> None:
     from agvsim.record.scan_log import open_scan_log
     from agvsim.slam.carmen import CarmenFormatError
@@ -596,7 +597,7 @@ def _slam_log(
             result = run_offline(
                 open_scan_log(log, robot, sensor),
                 out_dir,
-                config=SlamConfig.long_corridors() if long_corridors else None,
+                config=None if long_corridors else SlamConfig.point_samples(),
                 max_scans=max_scans,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
             )

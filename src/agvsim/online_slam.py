@@ -54,7 +54,7 @@ class OnlineSlam:
         spec = sim.sensors.specs[self.slot]
         self.angles = np.asarray(spec.beam_angles_rad, np.float64)
         mount = (spec.mount_xy_m[0], spec.mount_xy_m[1], spec.mount_yaw_rad)
-        base = SlamConfig.long_corridors() if cfg.long_corridors else SlamConfig()
+        base = SlamConfig() if cfg.long_corridors else SlamConfig.point_samples()
         config = SlamConfig(
             tracking=dataclasses.replace(base.tracking, resolution_m=cfg.resolution_m),
             loop=LoopConfig(min_score=cfg.loop_min_score, search_radius_m=cfg.loop_search_radius_m),

@@ -316,9 +316,10 @@ class SlamBlock(StrictConfig):
         default=1.0, gt=0, description="how often the live map is redrawn (browser app overlay)"
     )
     long_corridors: bool = Field(
-        default=False,
-        description="corridors beyond the lidar's reach: far wall samples spread along their "
-        "wall (agvsim slam --long-corridors; docs/slam.md)",
+        default=True,
+        description="far, edge-on wall samples spread along their wall, so corridors beyond "
+        "the lidar's reach do not hold tracking back; false: every return a bump (agvsim slam "
+        "--point-samples; docs/slam.md)",
     )
 
 

@@ -10,6 +10,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from agvsim.slam.frontend import glimpses, spread_edge_on
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
@@ -92,12 +93,30 @@ def test_a_wall_glimpsed_through_a_door_is_told_from_a_post() -> None:
     # and those samples have a farther neighbour on their wall
     door = np.array([[1.5, 1.25], [2.0, 1.25], [3.0, 5.0], [2.6, 1.25], [3.1, 1.25]])
     hits = np.ones(5, bool)
-    assert glimpses(door, hits, np.zeros(2), 0.5).tolist() == [False, False, True, False, False]
+    assert glimpses(door, hits, np.zeros(2), 0.5, 1.0).tolist() == [0, 0, 1, 0, 0]
     post = np.array([[-2.0, 6.0], [-1.0, 6.0], [0.0, 3.0], [1.0, 6.0], [2.0, 6.0]])
-    assert not glimpses(post, hits, np.zeros(2), 0.5).any()
+    assert not glimpses(post, hits, np.zeros(2), 0.5, 1.0).any()
     # a beam that returned nothing beside it: not a glimpse (it may be the end of a wall)
     hits[3] = False
-    assert not glimpses(door, hits, np.zeros(2), 0.5).any()
+    assert not glimpses(door, hits, np.zeros(2), 0.5, 1.0).any()
+
+
+def test_clutter_close_behind_its_neighbours_is_not_a_glimpse() -> None:
+    # a chair leg at (4, 0.1), 4.001 m off, seen between two table legs 3.437 and 3.551 m off
+    # (0.85 m and 0.71 m from it): 0.56 m behind the nearer. A back wall through a door lies
+    # metres behind a jamb; such clutter places the scan and stays in the live field unless
+    # the depth asked for is 0.56 m or less
+    legs = np.array([[3.4, -0.5], [4.0, 0.1], [3.5, 0.6]])
+    hits = np.ones(3, bool)
+    r = np.hypot(*legs.T)
+    assert r[1] - r[0] == pytest.approx(0.5646, abs=1e-4)
+    for depth, want in ((1.0, False), (0.57, False), (0.56, True), (0.0, True)):
+        assert glimpses(legs, hits, np.zeros(2), 0.5, depth)[1] == want, depth
+    # the edge-on back wall beside a jamb: its neighbour on the same wall 0.9 m nearer, the
+    # jamb 12.6 m nearer (the synthetic corridor below, 0.9 m into it, beam 17 deg)
+    deg = np.radians([16.0, 17.0, 18.0])
+    wall = np.array([16.18, 17.1, 4.53])[:, None] * np.column_stack([np.cos(deg), np.sin(deg)])
+    assert glimpses(wall, hits, np.zeros(2), 0.5, 1.0)[1]
 
 
 # a corridor 2.5 m wide and 60 m long with door openings 1 m wide, and rooms behind
@@ -147,14 +166,14 @@ def _run(cfg: SlamConfig) -> tuple[GraphSlam, float]:
 
 def test_a_corridor_beyond_the_range_does_not_hold_tracking_back() -> None:
     # the corridor's walls beyond 6 m show a sample every metre or more, the rooms' back
-    # walls a sample at a time through the doors. Stamped as bumps (the default, as on the
-    # published logs' figures), those samples hold every scan on the keyframe before, and
-    # tracking never leaves the start: 24 m behind. Spread along their walls, the glimpses
-    # left out (SlamConfig.long_corridors()), it ends within a metre (measured 0.63 m
-    # behind); spread 0.3 m each way instead of 0.5, 1.9 m behind, and 0.2 m (no farther than
-    # the next keyframe) still 24 m: the spread's end holds a scan as a bump did
-    assert abs(_drive(SlamConfig.long_corridors())) < 1.0
-    assert _drive(SlamConfig()) < -10.0
+    # walls a sample at a time through the doors. Stamped as bumps (SlamConfig.point_samples,
+    # as on the published logs' figures), those samples hold every scan on the keyframe
+    # before, and tracking never leaves the start: 24 m behind. Spread along their walls, the
+    # glimpses left out (the defaults), it ends within a metre (measured 0.63 m behind);
+    # spread 0.3 m each way instead of 0.5, 1.9 m behind, and 0.2 m (no farther than the next
+    # keyframe) still 24 m: the spread's end holds a scan as a bump did
+    assert abs(_drive(SlamConfig())) < 1.0
+    assert _drive(SlamConfig.point_samples()) < -10.0
 
 
 def test_keyframes_in_the_corridor_are_tied_to_their_submaps_softly_along_it() -> None:
@@ -163,7 +182,7 @@ def test_keyframes_in_the_corridor_are_tied_to_their_submaps_softly_along_it() -
     # (keyframe y: 1 / (2 cm)^2) and barely along it, so along it (keyframe x) the edge is
     # floored at 5 % of that; with the floor at 1 they are round, as before
     for floor, along in ((0.05, (124.9, 750.0)), (1.0, (2499.9, 2500.1))):
-        slam, _ = _run(dataclasses.replace(SlamConfig.long_corridors(), local_weak_floor=floor))
+        slam, _ = _run(dataclasses.replace(SlamConfig(), local_weak_floor=floor))
         g, subs = slam.graph, set(slam.submap_var)
         tie = np.isin(g.edge_i, list(subs)) & np.isin(g.edge_j, slam.node_var)
         info = g.information[tie]

@@ -251,16 +251,23 @@ def test_good_odometry_is_kept_from_the_first_scan() -> None:
     rng = np.random.default_rng(4)
     scans = [cast(p) + rng.normal(0.0, 0.03, ANGLES.size) for p in truth]
 
-    def track(fuse: bool) -> float:
-        cfg = SlamConfig(tracking=TrackingConfig(fuse_odometry=fuse))
+    def track(fuse: bool, edge_on: float | None) -> float:
+        cfg = SlamConfig(tracking=TrackingConfig(fuse_odometry=fuse, edge_on_turn_rad=edge_on))
         slam = GraphSlam(30.0, config=cfg)
         for k, (pose, ranges) in enumerate(zip(truth, scans, strict=True)):
             slam.update(0.1 * k, ranges, ANGLES, pose)
         local = np.asarray(slam.scan_local)
         return float(np.hypot(*(local[:, :2] - truth[:, :2]).T).mean())
 
-    fused, alone = track(True), track(False)
-    assert fused < 0.02 and fused < 0.5 * alone  # measured: 0.013 vs 0.031 m
+    # every return a bump (SlamConfig.point_samples), where the fusion was measured: 0.015
+    # against 0.031 m
+    fused, alone = track(True, None), track(False, None)
+    assert fused < 0.02 and fused < 0.5 * alone
+    # the defaults spread the hall's edge-on samples, which these noisy ranges cost: 0.027
+    # against 0.033 m (docs/slam.md, twelfth round)
+    edge_on = TrackingConfig().edge_on_turn_rad
+    fused, alone = track(True, edge_on), track(False, edge_on)
+    assert fused < 0.03 and fused < alone
 
 
 def test_finished_submap_keeps_only_its_occupied_cells() -> None:

@@ -65,17 +65,24 @@ class TrackingConfig:
     submap_keyframes: int = 40  # keyframes per submap
     submap_half_size_m: float = 45.0  # live submap grid: +- this around its origin
     surface_gap_m: float = 0.5  # neighbouring returns closer than this are joined in the field
-    # long corridors beyond the scanner's reach (off by default; docs/slam.md, eleventh
-    # round): a return whose neighbours both lie farther than surface_gap_m on a line through
+    # long corridors beyond the scanner's reach (docs/slam.md, issue 19's eleventh and twelfth
+    # rounds): a return whose neighbours both lie farther than surface_gap_m on a line through
     # it (a wall seen far off or edge-on) is stamped along that line, edge_on_reach_m each
     # way, not as a bump (spread_edge_on; the segments to the neighbours turn by at most
-    # this), and one seen through an opening, between nearer returns, is not stamped
-    # (glimpses). None: every return is a bump, as on the published logs' figures
-    edge_on_turn_rad: float | None = None
+    # this), and one seen through an opening, glimpse_depth_m or more behind the returns on
+    # either side, is not stamped (glimpses). None: every return is a bump, as on the
+    # published logs' figures (SlamConfig.point_samples); those bumps held tracking on its
+    # last keyframe along a simulated hospital's corridors wherever odometry's scale was
+    # 2 % or more off
+    edge_on_turn_rad: float | None = math.radians(15.0)
     # longer than the robot moves between keyframes and between scans: a spread's end holds
     # a scan as a bump did (0.3 m shrank the hospital by 1.3 % at 1.5 Hz, 0.4 m a scan);
     # longer, a keyframe's heading error reaches farther along the far walls
     edge_on_reach_m: float = 0.5
+    # a back wall through a door lies metres behind a jamb; a return between two nearer ones
+    # less than this behind both is clutter (a table's legs, a chair) that places the scan:
+    # left out, ACES lost a tenth of its accuracy
+    glimpse_depth_m: float = 1.0
     l_hit: float = 0.85
     l_miss: float = -0.4
     l_clamp: float = 4.0
@@ -205,25 +212,29 @@ def spread_edge_on(
 
 @njit(cache=True)
 def glimpses(
-    ends: np.ndarray, hits: np.ndarray, origin: np.ndarray, max_gap_m: float
+    ends: np.ndarray, hits: np.ndarray, origin: np.ndarray, max_gap_m: float, depth_m: float
 ) -> np.ndarray:
     """(n,) True for the hits seen through an opening: both beam neighbours returned, nearer
-    to ``origin`` (the sensor) and farther than ``max_gap_m`` from it, as a back wall glimpsed
-    through a door between its jambs. Which way that wall runs, one sample cannot say, so it
-    cannot be spread (:func:`spread_edge_on`); stamped as a bump it held tracking like an
-    edge-on sample does."""
+    to ``origin`` (the sensor), one of them by ``depth_m`` or more, and farther than
+    ``max_gap_m`` from it, as a back wall glimpsed through a door between its jambs (or
+    beside one, its other neighbour a sample of the same wall, seen edge-on). Which way that
+    wall runs, one sample cannot say, so it cannot be spread (:func:`spread_edge_on`);
+    stamped as a bump it held tracking like an edge-on sample does. Clutter less than
+    ``depth_m`` behind both neighbours (a lab's) places the scan and is kept."""
     n = ends.shape[0]
     out = np.zeros(n, dtype=np.bool_)
     for k in range(1, n - 1):
         if not (hits[k - 1] and hits[k] and hits[k + 1]):
             continue
         r = math.hypot(ends[k, 0] - origin[0], ends[k, 1] - origin[1])
-        behind = True
+        behind, depth = True, 0.0
         for j in (k - 1, k + 1):
             gap = math.hypot(ends[j, 0] - ends[k, 0], ends[j, 1] - ends[k, 1])
-            if gap <= max_gap_m or math.hypot(ends[j, 0] - origin[0], ends[j, 1] - origin[1]) >= r:
+            rj = math.hypot(ends[j, 0] - origin[0], ends[j, 1] - origin[1])
+            if gap <= max_gap_m or rj >= r:
                 behind = False
-        out[k] = behind
+            depth = max(depth, r - rj)
+        out[k] = behind and depth >= depth_m
     return out
 
 
@@ -287,7 +298,7 @@ class Submap:
             stamp = hits
             if cfg.edge_on_turn_rad is not None:
                 sensor = np.asarray(sensor_xy, np.float64).reshape(2)
-                stamp = hits & ~glimpses(ends, hits, sensor, cfg.surface_gap_m)
+                stamp = hits & ~glimpses(ends, hits, sensor, cfg.surface_gap_m, cfg.glimpse_depth_m)
             pts = densify_surface(ends, stamp, cfg.surface_gap_m, 0.5 * res)
             if cfg.edge_on_turn_rad is not None:
                 spread = spread_edge_on(
