@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -61,6 +62,9 @@ def test_round_where_the_match_says_nothing() -> None:
         (_corridor_hessian(0.3, 1e-3), 1.0),
     ):
         np.testing.assert_allclose(local_information(hess, 0.4, SIGMA_M, SIGMA_RAD, floor), round_)
+    for bad in (0.0, -0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="local_weak_floor must lie in"):
+            local_information(None, 0.0, SIGMA_M, SIGMA_RAD, bad)
     # a room's match, as sharp every way, stays round whatever the heading
     room = np.diag([400.0, 400.0, 900.0])
     np.testing.assert_allclose(local_information(room, 1.1, SIGMA_M, SIGMA_RAD, 0.05), round_)

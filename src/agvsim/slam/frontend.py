@@ -69,19 +69,19 @@ class TrackingConfig:
     # rounds): a return whose neighbours both lie farther than surface_gap_m on a line through
     # it (a wall seen far off or edge-on) is stamped along that line, edge_on_reach_m each
     # way, not as a bump (spread_edge_on; the segments to the neighbours turn by at most
-    # this), and one seen through an opening, glimpse_depth_m or more behind the returns on
-    # either side, is not stamped (glimpses). None: every return is a bump, as on the
-    # published logs' figures (SlamConfig.point_samples); those bumps held tracking on its
-    # last keyframe along a simulated hospital's corridors wherever odometry's scale was
-    # 2 % or more off
+    # this), and one seen through an opening, behind the returns on either side and
+    # glimpse_depth_m or more behind the nearer, is not stamped (glimpses). None: every
+    # return is a bump, as on the published logs' figures (SlamConfig.point_samples); those
+    # bumps held tracking on its last keyframe along a simulated hospital's corridors
+    # wherever odometry's scale was 2 % or more off
     edge_on_turn_rad: float | None = math.radians(15.0)
     # longer than the robot moves between keyframes and between scans: a spread's end holds
     # a scan as a bump did (0.3 m shrank the hospital by 1.3 % at 1.5 Hz, 0.4 m a scan);
     # longer, a keyframe's heading error reaches farther along the far walls
     edge_on_reach_m: float = 0.5
     # a back wall through a door lies metres behind a jamb; a return between two nearer ones
-    # less than this behind both is clutter (a table's legs, a chair) that places the scan:
-    # left out, ACES lost a tenth of its accuracy
+    # less than this behind both is clutter that places the scan: left out with the rest,
+    # ACES lost a tenth of its accuracy
     glimpse_depth_m: float = 1.0
     l_hit: float = 0.85
     l_miss: float = -0.4

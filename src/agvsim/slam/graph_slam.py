@@ -82,7 +82,8 @@ class SlamConfig:
     sigma_local_rad: float = math.radians(0.5)
     # ... along its best-placed direction: the keyframe's match shapes the rest, its weakest
     # direction's information floored at this fraction (local_information; a keyframe in a
-    # corridor is placed along it by odometry, not by the walls). 1: round, as before
+    # corridor is placed along it by odometry, not by the walls); in (0, 1], 1: round, as
+    # before
     local_weak_floor: float = 0.05
     huber_scale: float = 3.0  # in standard deviations
     switchable_loops: bool = True  # loop closures as switchable constraints (else Huber)
@@ -118,8 +119,10 @@ def local_information(
     heading. Along a corridor whose ends are out of reach the walls do not place a scan, and
     a round 2 cm edge there held a tracking slip of a metre against the loop closures that
     would have mended it (ACES, docs/slam-history.md). ``hess`` None, or no gradient: round."""
+    if not 0.0 < floor <= 1.0:
+        raise ValueError(f"local_weak_floor must lie in (0, 1], got {floor}")
     info = _information(sigma_m, sigma_rad)
-    if hess is None or floor >= 1.0:
+    if hess is None or floor == 1.0:
         return info
     c, s = math.cos(heading), math.sin(heading)
     rot = np.array([[c, s], [-s, c]])  # local -> keyframe frame: R^T
