@@ -164,6 +164,7 @@ def _run(cfg: SlamConfig) -> tuple[GraphSlam, float]:
     return slam, float(truth[-1, 0])
 
 
+@pytest.mark.slow  # two 401-scan drives: 16 s on a loaded 2-core machine
 def test_a_corridor_beyond_the_range_does_not_hold_tracking_back() -> None:
     # the corridor's walls beyond 6 m show a sample every metre or more, the rooms' back
     # walls a sample at a time through the doors. Stamped as bumps (SlamConfig.point_samples,
