@@ -295,20 +295,14 @@ class Submap:
         )
         pts = ends[hits]
         if cfg.surface_gap_m > 0:
-            stamp = hits
+            stamp, spread = hits, None
             if cfg.edge_on_turn_rad is not None:
                 sensor = np.asarray(sensor_xy, np.float64).reshape(2)
                 stamp = hits & ~glimpses(ends, hits, sensor, cfg.surface_gap_m, cfg.glimpse_depth_m)
+                gap, turn, reach = cfg.surface_gap_m, cfg.edge_on_turn_rad, cfg.edge_on_reach_m
+                spread = spread_edge_on(ends, hits, gap, 0.5 * res, turn, reach)
             pts = densify_surface(ends, stamp, cfg.surface_gap_m, 0.5 * res)
-            if cfg.edge_on_turn_rad is not None:
-                spread = spread_edge_on(
-                    ends,
-                    hits,
-                    cfg.surface_gap_m,
-                    0.5 * res,
-                    cfg.edge_on_turn_rad,
-                    cfg.edge_on_reach_m,
-                )
+            if spread is not None:
                 pts = np.concatenate((pts, spread))
         stamp_points(self.likelihood, self.ox, self.oy, res, pts, self.kernel)
         self.nodes.append(node)

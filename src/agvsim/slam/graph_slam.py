@@ -359,11 +359,11 @@ class GraphSlam:
             noise = self.tracker.odometry_variance()
             # no odometry edge across a stretch where scan matching refuted odometry (a
             # freeze, a jump, a slip): it would pull against the local-SLAM edge
-            if self.cfg.odometry_edges and noise is not None and not self._odom_doubted:
+            if cfg.odometry_edges and noise is not None and not self._odom_doubted:
                 # odometry's error is a random walk: the variance grows with the scans between
                 n = max(len(self.scan_times) - self._scan_at_keyframe, 1)
-                v_t = n * max(noise[0], self.cfg.odometry_floor_m**2)
-                v_r = n * max(noise[1], self.cfg.odometry_floor_rad**2)
+                v_t = n * max(noise[0], cfg.odometry_floor_m**2)
+                v_r = n * max(noise[1], cfg.odometry_floor_rad**2)
                 info = np.diag([1.0 / v_t, 1.0 / v_t, 1.0 / v_r])
                 self.graph.add_edge(self.node_var[node - 1], var, between(prev.odom, kf.odom), info)
         self._scan_at_keyframe = len(self.scan_times)
@@ -387,7 +387,7 @@ class GraphSlam:
         self._xy[node] = pose[:2]
         if node > 0 and self._relocated is None:
             step = between(self.keyframes[node - 1].local, pose)
-            self._var_t[node], self._var_r[node] = step_variances(self.cfg.loop, step)
+            self._var_t[node], self._var_r[node] = step_variances(cfg.loop, step)
         return node
 
     def find_loop_closures(self, node: int) -> list[LoopClosure]:
