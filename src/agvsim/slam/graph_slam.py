@@ -40,6 +40,7 @@ from agvsim.slam.loop_closure import (
     LoopClosure,
     LoopConfig,
     LoopDetector,
+    TiePlaces,
     drift_bounds,
     step_variances,
 )
@@ -68,7 +69,8 @@ class SlamConfig:
     The thesis's knobs: map resolution 20 cells/m is ``tracking.resolution_m``; max range 8 m
     is ``max_range_m`` (its 10 m lidar); the loop-closure threshold is ``loop.min_score`` (a
     mean likelihood in [0, 1]); the search radius 3 m is ``loop.search_radius_m``, widened by
-    the uncertainty accumulated since the last closure (:func:`~.loop_closure.drift_bounds`)."""
+    the uncertainty accumulated on the way back to each old keyframe, over the chain and the
+    accepted closures (:func:`~.loop_closure.drift_bounds`)."""
 
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     loop: LoopConfig = field(default_factory=LoopConfig)
@@ -202,10 +204,12 @@ class GraphSlam:
         self.scan_keyframe: list[int] = []
         self.loop_edges: list[LoopClosure] = []
         self._homes = np.zeros(0, np.int64)  # each keyframe's submap
-        self._xy = np.zeros((0, 2))  # each keyframe's local position (m)
         self._var_t = np.zeros(0)  # drift variance added by the step to each keyframe (m^2)
         self._var_r = np.zeros(0)  # ... in heading (rad^2)
-        self._node_at_loop = 0  # the node of the last accepted loop closure
+        # each loop closure's keyframe and the first and last keyframes of the submap it tied,
+        # and the keyframes those the optimiser kept hold together (drift_bounds)
+        self._ties: list[tuple[int, int, int]] = []
+        self._places = TiePlaces()
         self.n_optimisations = 0
         self._global_from_local = np.zeros(3)
         self._unoptimised: list[LoopClosure] = []
@@ -380,11 +384,9 @@ class GraphSlam:
         if node >= len(self._homes):
             grow = max(node, 64)
             self._homes = np.concatenate([self._homes, np.zeros(grow, np.int64)])
-            self._xy = np.concatenate([self._xy, np.zeros((grow, 2))])
             self._var_t = np.concatenate([self._var_t, np.zeros(grow)])
             self._var_r = np.concatenate([self._var_r, np.zeros(grow)])
         self._homes[node] = kf.submap
-        self._xy[node] = pose[:2]
         if node > 0 and self._relocated is None:
             step = between(self.keyframes[node - 1].local, pose)
             self._var_t[node], self._var_r[node] = step_variances(cfg.loop, step)
@@ -393,14 +395,16 @@ class GraphSlam:
     def find_loop_closures(self, node: int) -> list[LoopClosure]:
         """Candidates within the search radius, matched and verified (for a keyframe whose
         matching points are still kept: the newest)."""
+        cfg = self.cfg
         est = self.graph.poses[np.asarray(self.node_var)]
         homes = self._homes[: len(self.keyframes)]
         kf = self.keyframes[node]
         if kf.points is None:
             raise ValueError(f"keyframe {node}: its matching points were dropped")
         out: list[LoopClosure] = []
+        self._places.grow(node + 1)
         drift_m, drift_rad = drift_bounds(
-            self._xy, self._var_t, self._var_r, node, self._node_at_loop, self.cfg.loop.drift_sigmas
+            est[:, :2], self._var_t, self._var_r, node, cfg.loop.drift_sigmas, self._places.place
         )
         for s, bound_m, bound_rad in self.loops.candidates(
             node, est[:, :2], homes, drift_m, self.tracker.submaps, drift_rad
@@ -526,8 +530,20 @@ class GraphSlam:
             self.submap_var[c.submap], self.node_var[c.node], c.measurement, c.information
         )
         self.loop_edges.append(c)
-        self._node_at_loop = c.node
+        nodes = self.tracker.submaps[c.submap].nodes
+        self._ties.append((c.node, min(nodes), max(nodes)))
+        self._places.tie(c.node, min(nodes))
+        self._places.tie(c.node, max(nodes))
         self._unoptimised.append(c)
+
+    def _held_ties(self) -> NDArray[np.int64]:
+        """(M, 2) keyframe pairs held together by the loop closures the last optimisation kept
+        (switch at least a half) and those added since."""
+        ties = np.asarray(self._ties, dtype=np.int64).reshape(-1, 3)
+        held = np.ones(len(ties), dtype=bool)
+        held[: len(self.switches)] = self.switches >= 0.5
+        ties = ties[held]
+        return np.concatenate([ties[:, [0, 1]], ties[:, [0, 2]]])
 
     def loop_closed(self) -> bool:
         """Optimise after a closure that moves the graph, or every ``optimize_every`` keyframes
@@ -584,6 +600,8 @@ class GraphSlam:
             )
             self.graph.poses = result.poses
         self.switches = result.switches[mask]
+        # a closure switched off holds nothing together (and one switched on again does)
+        self._places.reset(self._held_ties(), len(self.keyframes))
         last = len(self.keyframes) - 1
         g_last = self.graph.poses[self.node_var[last]]
         self._global_from_local = compose(g_last, inverse(self.keyframes[last].local))

@@ -4,11 +4,12 @@ For a new keyframe ``i`` with global estimate ``g_i``, every finished submap ``s
 keyframe ``k`` within ``search_radius_m + b_k`` of ``g_i`` (and none of the last
 ``min_node_gap`` keyframes) is a candidate. ``b_k`` bounds how far the graph's estimate of
 ``k`` relative to ``i`` may be off: ``drift_sigmas`` standard deviations of the relative pose's
-covariance, propagated along the keyframe chain from ``k`` (or from the last accepted closure,
-which holds the graph there) to ``i`` (:func:`drift_bounds`). Each step adds a random walk in
-translation and heading that grows with the distance driven and the angle turned, and a
-heading error at step ``j`` swings everything after it by the lever arm ``|p_i - p_j|``: the
-search grows fast on long loops and not on a robot turning on the spot, with no fixed radius.
+covariance, propagated along the most certain route from ``k`` to ``i``: over the keyframe
+chain and across the accepted loop closures, each of which holds its keyframe to the submap it
+matched (:func:`drift_bounds`). Each step adds a random walk in translation and heading that
+grows with the distance driven and the angle turned, and a heading error at step ``j`` swings
+the rest of the route by the lever arm ``|p_i - p_j|``: the search grows fast on long loops
+and not on a robot turning on the spot, with no fixed radius.
 The match's windows grow the same way, in translation and in heading.
 
 The scan is placed in the submap's frame at the graph's guess ``x_0 = o_s * (G_s^-1 * g_i)``
@@ -38,14 +39,24 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.sparse.csgraph import connected_components, dijkstra
 
 from agvsim.slam import scan_matching as sm
 from agvsim.slam.frontend import Submap
 from agvsim.slam.memory import HeapReleaser
 from agvsim.slam.se2 import between, compose
 
-__all__ = ["LoopClosure", "LoopConfig", "LoopDetector", "drift_bounds", "step_variances"]
+__all__ = [
+    "LoopClosure",
+    "LoopConfig",
+    "LoopDetector",
+    "TiePlaces",
+    "drift_bounds",
+    "step_variances",
+    "tie_places",
+]
 
 F64 = NDArray[np.float64]
 
@@ -279,33 +290,119 @@ def step_variances(cfg: LoopConfig, step: F64) -> tuple[float, float]:
     return var_t, var_r
 
 
+def tie_places(ties: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """(n,) the place of each of ``n`` keyframes: keyframes that ``ties (M, 2)`` hold together
+    (directly or through others) share a label, their lowest keyframe's index; a keyframe no
+    tie holds is -1. See :func:`drift_bounds` and :class:`TiePlaces`."""
+    ties = np.asarray(ties, dtype=np.int64).reshape(-1, 2)
+    if np.any((ties < 0) | (ties >= n)):
+        raise ValueError(f"ties must name keyframes 0..{n - 1}")
+    graph = sp.coo_matrix((np.ones(len(ties)), (ties[:, 0], ties[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    lowest = np.full(n, n, dtype=np.int64)
+    np.minimum.at(lowest, comp, np.arange(n))
+    place = lowest[comp]
+    tied = np.zeros(n, dtype=bool)
+    tied[ties.ravel()] = True
+    place[~tied] = -1
+    return place
+
+
+class TiePlaces:
+    """:func:`tie_places` kept up to date as ties come in, one at a time (a tie that joins two
+    places, or brings in a keyframe lower than its place's, relabels: one pass over the
+    keyframes)."""
+
+    def __init__(self) -> None:
+        self.place = np.zeros(0, dtype=np.int64)
+
+    def grow(self, n: int) -> None:
+        """Room for ``n`` keyframes (new ones untied)."""
+        if n > len(self.place):
+            extra = np.full(max(n, 2 * len(self.place)) - len(self.place), -1, dtype=np.int64)
+            self.place = np.concatenate([self.place, extra])
+
+    def tie(self, a: int, b: int) -> None:
+        """Hold keyframes ``a`` and ``b`` together."""
+        self.grow(max(a, b) + 1)
+        p = self.place
+        labels = [int(x) for x in (p[a], p[b]) if x >= 0]
+        low = min(a, b, *labels)  # a place is labelled by its lowest keyframe
+        for x in set(labels) - {low}:
+            p[p == x] = low
+        p[a] = p[b] = low
+
+    def reset(self, ties: NDArray[np.int64], n: int) -> None:
+        """Start again from ``ties`` alone (after some were dropped)."""
+        self.place = tie_places(ties, max(n, 1))
+
+
 def drift_bounds(
-    xy: F64, var_t: F64, var_r: F64, node: int, anchor: int, sigmas: float
+    xy: F64,
+    var_t: F64,
+    var_r: F64,
+    node: int,
+    sigmas: float,
+    place: NDArray[np.int64] | None = None,
 ) -> tuple[F64, F64]:
     """How far the graph's estimate of each keyframe ``k <= node`` relative to ``node`` may be
-    off: ``sigmas`` standard deviations of the relative pose, ``(bound_m (node+1,), bound_rad
-    (node+1,))``, after first-order propagation along the chain of keyframe steps.
+    off: ``sigmas`` standard deviations of the relative pose along the most certain route
+    between them, ``(bound_m (node+1,), bound_rad (node+1,))``.
 
-    ``xy (N, 2)`` keyframe positions along the chain (local tracking frame), ``var_t (N,)``
-    and ``var_r (N,)`` the variances each step ``j - 1 -> j`` adds (:func:`step_variances`).
-    Step ``j``'s heading error swings the rest of the chain about ``p_j``, moving ``node`` by
-    the lever arm ``|p_node - p_j|``, so::
+    Along the keyframe chain, first-order propagation: ``xy (N, 2)`` keyframe positions (the
+    graph's estimate), ``var_t (N,)`` and ``var_r (N,)`` the variances each step ``j - 1 ->
+    j`` adds (:func:`step_variances`). Step ``j``'s heading error swings the rest of the route
+    about ``p_j``, moving ``node`` by the lever arm ``|p_node - p_j|``, so a stretch of chain
+    ``(a, b]`` costs::
 
-        var_xy(k) = sum_{j in (max(k, anchor), node]} 2 var_t[j] + var_r[j] |p_node - p_j|^2
-        var_th(k) = sum_{j in (max(k, anchor), node]} var_r[j]
+        var_xy = sum_{j in (a, b]} 2 var_t[j] + var_r[j] |p_node - p_j|^2
+        var_th = sum_{j in (a, b]} var_r[j]
 
     (``var_xy`` is the trace of the 2x2 position covariance: the bound is ``sigmas *
-    sqrt(var_xy)``). Keyframes before ``anchor`` (the node of the last accepted loop closure,
-    where the graph is held) share ``anchor``'s bound."""
-    lo = max(min(anchor, node), 0)
-    j = np.arange(lo + 1, node + 1)
-    lever2 = np.sum((xy[j] - xy[node]) ** 2, axis=1)
-    add_xy = 2.0 * var_t[j] + var_r[j] * lever2
-    # sums over j > k: reversed cumulative sums, then flat before the anchor
-    tail_xy = np.concatenate([np.cumsum(add_xy[::-1])[::-1], [0.0]])
-    tail_th = np.concatenate([np.cumsum(var_r[j][::-1])[::-1], [0.0]])
-    var_xy = np.empty(node + 1)
-    var_th = np.empty(node + 1)
-    var_xy[:lo], var_th[:lo] = tail_xy[0], tail_th[0]
-    var_xy[lo:], var_th[lo:] = tail_xy, tail_th
-    return sigmas * np.sqrt(var_xy), sigmas * np.sqrt(var_th)
+    sqrt(var_xy)``). Accepted loop closures tie keyframes together (a closure's keyframe and
+    the first and last keyframes of the submap it matched): ``place (>= node+1,)`` labels the
+    keyframes held together (:func:`tie_places`; -1: untied; None: no ties), and crossing
+    between keyframes of one place costs nothing. Only the keyframes a closure's route reaches
+    cheaply get small bounds, not everything before the last closure: a closure onto a pass
+    that slipped holds ``node`` to that pass and leaves older passes as uncertain as the chain
+    between them. The cheapest routes come from a shortest-path search over the places alone,
+    joined by the stretches of chain between neighbouring tied keyframes (summed from prefix
+    sums); every other keyframe is reached along the chain from the nearest tied keyframe (or
+    ``node``, or keyframe 0) on either side."""
+    dx = xy[1 : node + 1, 0] - xy[node, 0]
+    dy = xy[1 : node + 1, 1] - xy[node, 1]
+    vr = var_r[1 : node + 1]
+    # cost of the chain from keyframe 0 to keyframe k: prefix sums over the steps j <= k
+    chain = (np.zeros(node + 1), np.zeros(node + 1))
+    np.cumsum(2.0 * var_t[1 : node + 1] + vr * (dx * dx + dy * dy), out=chain[0][1:])
+    np.cumsum(vr, out=chain[1][1:])
+    labels = np.full(node + 1, -1, dtype=np.int64) if place is None else place[: node + 1]
+    is_vert = labels >= 0
+    is_vert[0] = is_vert[node] = True
+    verts = np.flatnonzero(is_vert)
+    # places numbered 0..P-1; keyframe 0 and the node, untied, are places of their own
+    ids = np.where(labels[verts] >= 0, labels[verts], verts)
+    seen = np.zeros(node + 1, dtype=np.int64)
+    seen[ids] = 1
+    number = np.cumsum(seen) - 1
+    n_places = int(number[-1]) + 1
+    pl = number[ids]
+    i = np.flatnonzero(pl[:-1] != pl[1:])  # stretches between neighbours in different places
+    lo, hi = np.minimum(pl[i], pl[i + 1]), np.maximum(pl[i], pl[i + 1])
+    k = np.arange(node + 1)
+    left = np.cumsum(is_vert) - 1  # index of the nearest vertex at or before k
+    right = left + ~is_vert  # ... at or after k
+    out = []
+    for c in chain:
+        w = c[verts[i + 1]] - c[verts[i]]
+        # two places joined by several stretches: the cheapest (a sparse matrix would sum)
+        order = np.lexsort((w, hi, lo))
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = (lo[order][1:] != lo[order][:-1]) | (hi[order][1:] != hi[order][:-1])
+        pick = order[first]
+        # a tiny cost keeps a free stretch an edge (zero means no edge)
+        graph = sp.csr_matrix((w[pick] + 1e-18, (lo[pick], hi[pick])), shape=(n_places,) * 2)
+        dist = dijkstra(graph, directed=False, indices=pl[-1])[pl]  # verts[-1] == node
+        var = np.minimum(dist[left] + c[k] - c[verts[left]], dist[right] + c[verts[right]] - c[k])
+        out.append(sigmas * np.sqrt(np.maximum(var, 0.0)))
+    return out[0], out[1]
