@@ -212,7 +212,9 @@ class GraphSlam:
         self._places = TiePlaces()
         self.n_optimisations = 0
         self._global_from_local = np.zeros(3)
-        self._unoptimised: list[LoopClosure] = []
+        # closures added since the last optimisation, and whether one of them moves the graph
+        self._unoptimised = 0
+        self._moving_closure = False
         self._loop_edge_ids: list[int] = []  # graph edge index of every loop closure
         self._loops_optimised = 0  # closures in the graph at the last optimisation
         self.switches = np.zeros(0)  # switch of every loop closure at the last optimisation
@@ -534,7 +536,8 @@ class GraphSlam:
         self._ties.append((c.node, min(nodes), max(nodes)))
         self._places.tie(c.node, min(nodes))
         self._places.tie(c.node, max(nodes))
-        self._unoptimised.append(c)
+        self._unoptimised += 1
+        self._moving_closure |= not self.loops.agrees(between(c.estimate, c.matched))
 
     def _held_ties(self) -> NDArray[np.int64]:
         """(M, 2) keyframe pairs held together by the loop closures the last optimisation kept
@@ -550,8 +553,8 @@ class GraphSlam:
         while small closures come in."""
         if not self._unoptimised:
             return False
-        big = any(not self.loops.agrees(between(c.estimate, c.matched)) for c in self._unoptimised)
-        return big or len(self.keyframes) - self._last_optimised_node >= self.cfg.optimize_every
+        due = len(self.keyframes) - self._last_optimised_node >= self.cfg.optimize_every
+        return self._moving_closure or due
 
     def switchable_edges(self) -> NDArray[np.bool_]:
         """(E,) True for the graph's loop-closure edges (all False if they are not switchable)."""
@@ -605,7 +608,8 @@ class GraphSlam:
         last = len(self.keyframes) - 1
         g_last = self.graph.poses[self.node_var[last]]
         self._global_from_local = compose(g_last, inverse(self.keyframes[last].local))
-        self._unoptimised = []
+        self._unoptimised = 0
+        self._moving_closure = False
         self._loops_optimised = len(self._loop_edge_ids)
         self._last_optimised_node = len(self.keyframes)
         self.loops.clear_pending()
