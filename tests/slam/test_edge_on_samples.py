@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from agvsim.slam.frontend import glimpses, spread_edge_on
+from agvsim.slam.frontend import Tracker, TrackingConfig, glimpses, spread_edge_on
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.se2 import between, compose
 
@@ -139,19 +139,20 @@ def _cast(pose: np.ndarray, walls: np.ndarray) -> np.ndarray:
     return np.where(r <= RANGE_M, r, np.inf)
 
 
-def _drive(cfg: SlamConfig) -> float:
-    """Drive 24 m east along the corridor at 6 cm a scan (odometry with 0.2 mm of noise a
-    scan); returns how far the SLAM pose ends behind (-) or ahead (+) of the truth along the
-    corridor."""
-    slam, end_x = _run(cfg)
+def _drive(cfg: SlamConfig, step_m: float = 0.06) -> float:
+    """Drive 24 m east along the corridor at ``step_m`` a scan (odometry with 0.2 mm of noise
+    a scan); returns how far the SLAM pose ends behind (-) or ahead (+) of the truth along
+    the corridor."""
+    slam, end_x = _run(cfg, step_m)
     return float(slam.trajectory()[1][-1, 0] - end_x)
 
 
-def _run(cfg: SlamConfig) -> tuple[GraphSlam, float]:
+def _run(cfg: SlamConfig, step_m: float = 0.06) -> tuple[GraphSlam, float]:
     """:func:`_drive`'s SLAM, finished, and the true end's x."""
     walls = _corridor()
     rng = np.random.default_rng(3)
-    truth = np.array([[-26.0 + 0.06 * k, 0.0, 0.0] for k in range(401)])
+    n = round(24.0 / step_m)
+    truth = np.array([[-26.0 + step_m * k, 0.0, 0.0] for k in range(n + 1)])
     odom = [truth[0]]
     for a, b in zip(truth[:-1], truth[1:], strict=True):
         d = between(a, b) + rng.normal(0, [2e-4, 2e-4, 2e-4])
@@ -175,6 +176,51 @@ def test_a_corridor_beyond_the_range_does_not_hold_tracking_back() -> None:
     # keyframe) still 24 m: the spread's end holds a scan as a bump did
     assert abs(_drive(SlamConfig())) < 1.0
     assert _drive(SlamConfig.point_samples()) < -10.0
+
+
+def test_sparse_scans_stamp_point_samples_and_still_drive_on() -> None:
+    # 0.4 m a scan, farther than the narrow window (0.15 m): a keyframe's bumps cannot hold
+    # the next scan, so the tracker stamps point samples (and keeps the glimpses), which on
+    # the simulated hospital at 1-2.5 Hz placed scans up to three times better than spread
+    # samples; tracking reaches the end of the corridor either way
+    for cfg in (SlamConfig(), SlamConfig.point_samples()):
+        slam, end_x = _run(cfg, 0.4)
+        assert not slam.tracker.dense_scans()
+        assert abs(slam.trajectory()[1][-1, 0] - end_x) < 1.0
+    # with the limit raised past the step the samples are spread again
+    wide = dataclasses.replace(SlamConfig().tracking, edge_on_max_step_m=0.5)
+    slam, end_x = _run(dataclasses.replace(SlamConfig(), tracking=wide), 0.4)
+    assert slam.tracker.dense_scans()
+    assert abs(slam.trajectory()[1][-1, 0] - end_x) < 1.0
+
+
+def test_dense_scans_follow_the_median_of_the_recent_steps() -> None:
+    tracker = Tracker(TrackingConfig(steps_kept=5))
+    assert tracker.dense_scans()  # not moved yet
+    x = 0.0
+    for step, dense in (
+        (0.0, True),
+        (0.1, True),
+        (0.1, True),
+        (0.005, True),
+        (0.2, True),
+        (0.2, True),
+        (0.2, False),
+        (0.2, False),
+    ):
+        x += step
+        pose = np.array([x, 0.0, 0.0])
+        tracker.predict(pose)
+        tracker.accept(pose, pose)
+        # steps under 1 cm do not count; the median of the last five moving steps
+        assert tracker.dense_scans() == dense, (x, step)
+    assert Tracker(TrackingConfig(steps_kept=5, edge_on_max_step_m=0.2)).dense_scans()
+    loose = Tracker(TrackingConfig(steps_kept=5, edge_on_max_step_m=0.2))
+    for k in range(4):
+        pose = np.array([0.2 * k, 0.0, 0.0])
+        loose.predict(pose)
+        loose.accept(pose, pose)
+    assert loose.dense_scans()  # 0.2 m steps, at the limit
 
 
 def test_keyframes_in_the_corridor_are_tied_to_their_submaps_softly_along_it() -> None:
