@@ -527,8 +527,9 @@ def slam(
             "--long-corridors/--point-samples",
             help="Mapping: spread far, edge-on wall samples along their wall and leave "
             "glimpses through doors out of the live map, so corridors that run beyond the "
-            "scanner's reach do not hold tracking back (the default); --point-samples: every "
-            "return a bump, the published figures' setting (docs/slam.md).",
+            "scanner's reach do not hold tracking back (the default, while the scans come "
+            "densely); --point-samples: every return a bump, the published figures' setting "
+            "(docs/slam.md).",
         ),
     ] = True,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,

@@ -317,9 +317,9 @@ class SlamBlock(StrictConfig):
     )
     long_corridors: bool = Field(
         default=True,
-        description="far, edge-on wall samples spread along their wall, so corridors beyond "
-        "the lidar's reach do not hold tracking back; false: every return a bump (agvsim slam "
-        "--point-samples; docs/slam.md)",
+        description="far, edge-on wall samples spread along their wall while the scans come "
+        "densely, so corridors beyond the lidar's reach do not hold tracking back; false: every "
+        "return a bump (agvsim slam --point-samples; docs/slam.md)",
     )
 
 
