@@ -30,6 +30,15 @@ A fault is one random draw (which scans a thinned log keeps, the range noise, wh
 freezes): ``--seeds K`` runs every faulty case with seeds ``S .. S+K-1`` and ends with the
 mean and the worst of each ratio over them (the unperturbed case runs once).
 
+Faults combine with ``+``, applied left to right (``scale+thin``: a wheel-scale error, then
+thinned); ``--scale`` sets the scale fault's factor (1.05) and ``--rate`` the rate in Hz of
+``thin`` and ``sparse`` (1.5 and 1); ``--point-samples`` runs ``SlamConfig.point_samples()``
+instead of the defaults, and ``--edge-on-max-step M`` spreads edge-on samples while the scans
+move up to M metres (the default: the tracking window, 0.15 m; 9 spreads at every rate).
+docs/slam.md's rate sweep is ``--logs --mcap runs/slam_hospital/run.mcap --faults
+scale+thin --scale 0.97 --rate R`` with ``--point-samples`` and with ``--edge-on-max-step
+9``.
+
 MIT Killian Court has no usable relations (synthetic time stamps): it is scored by the map's
 own consistency, the share of keyframe returns that land within 0.1 m of an occupied cell of
 the final map, and by the *revisit agreement* (:func:`revisit_agreement`): the map of the
@@ -42,6 +51,7 @@ does not gate. Without the data sets folder it prints a note and exits.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import resource
 import sys
@@ -63,8 +73,9 @@ from agvsim.slam.evaluate import (  # noqa: E402
     evaluate_relations,
     load_relations,
 )
+from agvsim.slam.graph_slam import SlamConfig  # noqa: E402
 from agvsim.slam.offline import map_scans  # noqa: E402
-from agvsim.slam.perturb import Fault, apply_fault  # noqa: E402
+from agvsim.slam.perturb import Fault, FaultConfig, apply_fault  # noqa: E402
 
 LOGS = {
     "aces": ("aces/aces.clf.gz", "aces/aces.relations"),
@@ -182,11 +193,32 @@ def there_and_back(scans: Iterable[LaserScan], passes: int) -> Iterator[LaserSca
             yield replace(rec, stamp_s=t + (k - (k % 2)) * span + (0.1 if k % 2 else 0.0))
 
 
+def fault_spec(text: str) -> str:
+    """A fault, or faults joined by ``+`` (applied left to right): each one of
+    :class:`~agvsim.slam.perturb.Fault` (argparse type)."""
+    names = [f.value for f in Fault]
+    for part in text.split("+"):
+        if part not in names:
+            raise argparse.ArgumentTypeError(
+                f"fault {part!r} in {text!r}: use one of {', '.join(names)}, joined by +"
+            )
+    return text
+
+
 def run_case(
-    root: Path, log: str, fault: str, seed: int, passes: int = 1, maps: Path | None = None
+    root: Path,
+    log: str,
+    fault: str,
+    seed: int,
+    passes: int = 1,
+    maps: Path | None = None,
+    fault_cfg: FaultConfig | None = None,
+    config: SlamConfig | None = None,
 ) -> dict[str, float | int | str]:
     """One (log, fault) case; returns its figures (runs in a worker process). ``log`` is a
-    data set name of :data:`LOGS` or the path of a simulated ``run.mcap``."""
+    data set name of :data:`LOGS` or the path of a simulated ``run.mcap``; ``fault`` one
+    fault or several joined by ``+`` (:func:`fault_spec`), with ``fault_cfg``'s parameters;
+    ``config`` the SLAM's (None: the defaults)."""
     from agvsim.record.scan_log import open_scan_log
 
     if log.endswith(".mcap"):
@@ -198,7 +230,9 @@ def run_case(
     odoms: list[np.ndarray] = []
 
     def tap(scans: Iterable[LaserScan]) -> Iterator[LaserScan]:
-        for rec in apply_fault(scans, fault, rng):
+        for part in fault.split("+"):
+            scans = apply_fault(scans, part, rng, fault_cfg)
+        for rec in scans:
             stamps.append(rec.stamp_s)
             odoms.append(rec.odom_pose)
             yield rec
@@ -207,7 +241,7 @@ def run_case(
     source: Iterable[LaserScan] = open_scan_log(path)
     if passes > 1:
         source = there_and_back(source, passes)
-    slam = map_scans(tap(source))
+    slam = map_scans(tap(source), config)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     slam_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # before the map
     assert slam is not None
@@ -329,7 +363,28 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         help="simulated recordings (agvsim run ... run.mcap), scored on their ground truth",
     )
-    ap.add_argument("--faults", nargs="*", default=[f.value for f in Fault], choices=list(Fault))
+    ap.add_argument(
+        "--faults",
+        nargs="*",
+        default=[f.value for f in Fault],
+        type=fault_spec,
+        help="faults to run, each one or several joined by + (scale+thin)",
+    )
+    ap.add_argument("--scale", type=float, default=None, help="the scale fault's factor (1.05)")
+    ap.add_argument(
+        "--rate", type=float, default=None, help="thin's and sparse's rate, Hz (1.5 and 1)"
+    )
+    ap.add_argument(
+        "--point-samples",
+        action="store_true",
+        help="run SlamConfig.point_samples() instead of the defaults",
+    )
+    ap.add_argument(
+        "--edge-on-max-step",
+        type=float,
+        default=None,
+        help="spread edge-on samples while the scans move up to this, m (default 0.15)",
+    )
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument(
@@ -348,6 +403,19 @@ def main(argv: list[str] | None = None) -> int:
         print("robustness suite skipped: no data sets folder (set AGVSIM_DATASETS)")
         return 0
     logs = list(args.logs) + [str(p.resolve()) for p in args.mcap]
+    fault_cfg = FaultConfig()
+    if args.scale is not None:
+        fault_cfg = dataclasses.replace(fault_cfg, odometry_scale=args.scale)
+    if args.rate is not None:
+        fault_cfg = dataclasses.replace(fault_cfg, thin_rate_hz=args.rate, sparse_rate_hz=args.rate)
+    config = SlamConfig.point_samples() if args.point_samples else None
+    if args.edge_on_max_step is not None:
+        if args.point_samples:
+            ap.error("--edge-on-max-step spreads edge-on samples; --point-samples never does")
+        tracking = dataclasses.replace(
+            SlamConfig().tracking, edge_on_max_step_m=args.edge_on_max_step
+        )
+        config = dataclasses.replace(SlamConfig(), tracking=tracking)
     if args.seeds < 1:
         ap.error(f"--seeds must be at least 1, got {args.seeds}")
     cases = [
@@ -371,7 +439,7 @@ def main(argv: list[str] | None = None) -> int:
     ratios: dict[tuple[str, str], list[tuple[float, float, float, float]]] = {}
     with ProcessPoolExecutor(max_workers=args.jobs, max_tasks_per_child=1) as pool:
         futures = [
-            pool.submit(run_case, root, log, f, seed, args.passes, args.maps)
+            pool.submit(run_case, root, log, f, seed, args.passes, args.maps, fault_cfg, config)
             for log, f, seed in cases
         ]
         for fut, (_, _, seed) in zip(futures, cases, strict=True):

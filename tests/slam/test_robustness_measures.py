@@ -73,3 +73,15 @@ def test_kept_ratio_charges_the_interpolation_to_both_runs() -> None:
     # the chords: the unperturbed run read between its kept scans is far off
     exact = evaluate_relations(Trajectory(t, noisy), rel).translation_mean_m
     assert read > 2.0 * exact
+
+
+def test_faults_combine_with_plus_and_a_wrong_one_is_named(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    bench = _bench()
+    assert bench.fault_spec("scale+thin") == "scale+thin"
+    assert bench.fault_spec("none") == "none"
+    with pytest.raises(SystemExit):
+        bench.main(["--faults", "scale+fast", "--logs"])
+    err = capsys.readouterr().err
+    assert "fault 'fast' in 'scale+fast'" in err and "freeze-turn" in err
