@@ -389,20 +389,20 @@ def drift_bounds(
     pl = number[ids]
     i = np.flatnonzero(pl[:-1] != pl[1:])  # stretches between neighbours in different places
     lo, hi = np.minimum(pl[i], pl[i + 1]), np.maximum(pl[i], pl[i + 1])
-    k = np.arange(node + 1)
-    left = np.cumsum(is_vert) - 1  # index of the nearest vertex at or before k
-    right = left + ~is_vert  # ... at or after k
+    left = np.cumsum(is_vert) - 1  # for each keyframe: the nearest vertex at or before it
+    right = left + ~is_vert  # ... at or after it
     out = []
-    for c in chain:
+    for c in chain:  # c[k]: the chain's cost from keyframe 0 to k
         w = c[verts[i + 1]] - c[verts[i]]
         # two places joined by several stretches: the cheapest (a sparse matrix would sum)
         order = np.lexsort((w, hi, lo))
+        lo_o, hi_o = lo[order], hi[order]
         first = np.ones(len(order), dtype=bool)
-        first[1:] = (lo[order][1:] != lo[order][:-1]) | (hi[order][1:] != hi[order][:-1])
+        first[1:] = (lo_o[1:] != lo_o[:-1]) | (hi_o[1:] != hi_o[:-1])
         pick = order[first]
         # a tiny cost keeps a free stretch an edge (zero means no edge)
         graph = sp.csr_matrix((w[pick] + 1e-18, (lo[pick], hi[pick])), shape=(n_places,) * 2)
         dist = dijkstra(graph, directed=False, indices=pl[-1])[pl]  # verts[-1] == node
-        var = np.minimum(dist[left] + c[k] - c[verts[left]], dist[right] + c[verts[right]] - c[k])
+        var = np.minimum(dist[left] + c - c[verts[left]], dist[right] + c[verts[right]] - c)
         out.append(sigmas * np.sqrt(np.maximum(var, 0.0)))
     return out[0], out[1]
