@@ -88,9 +88,10 @@ def _odometry_error(stamps: np.ndarray, odom: np.ndarray, rel: Relations) -> flo
     return evaluate_relations(Trajectory(stamps, odom), rel).translation_mean_m
 
 
-def truth_relations(path: Path, seed: int = 0) -> Relations:
+def truth_relations(path: Path, seed: int = 0, passes: int = 1) -> Relations:
     """Relations of a simulated recording from its ground truth, Kümmerle-style: every
-    scan paired with the scan 10 later (short) and with a random scan (long, loop-closing)."""
+    scan paired with the scan 10 later (short) and with a random scan (long, loop-closing);
+    over all ``passes`` of :func:`there_and_back` (the random scan from any pass)."""
     from agvsim.record.mcap_reader import Recording
     from agvsim.record.ros2msg import topic_name
     from agvsim.record.scan_log import McapScanLog, interpolate_poses
@@ -100,6 +101,9 @@ def truth_relations(path: Path, seed: int = 0) -> Relations:
     t_gt, gt, _ = Recording(path).odometry(f"/{topic_name(log.robot)}/ground_truth")
     t = log.scans.stamp_s
     truth = interpolate_poses(t, t_gt, gt)
+    if passes > 1:
+        t, k = pass_stamps(t, passes)
+        truth = truth[k]
     # every scan (not every 5th): a log thinned to 1.5 Hz keeps both ends of a few hundred
     # of them, not of two dozen
     i = np.arange(0, len(t) - 10)
@@ -177,20 +181,31 @@ def kept_ratio(
     return errs[0] / errs[1], int(ok.sum()), errs[1]
 
 
+def pass_stamps(t: np.ndarray, passes: int) -> tuple[np.ndarray, np.ndarray]:
+    """The time stamps of :func:`there_and_back`'s scans for a log stamped ``t`` (n,), and
+    the index into ``t`` of each: forward, then backward with the time mirrored, ..."""
+    t = np.asarray(t, dtype=np.float64)
+    t0, t1 = float(t[0]), float(t[-1])
+    span = t1 - t0 + 0.1
+    stamps, index = [t], [np.arange(len(t))]
+    for k in range(1, passes):
+        idx = np.arange(len(t))[::-1] if k % 2 else np.arange(len(t))
+        base = (t1 + (t1 - t[idx])) if k % 2 else t[idx]
+        stamps.append(base + (k - (k % 2)) * span + (0.1 if k % 2 else 0.0))
+        index.append(idx)
+    return np.concatenate(stamps), np.concatenate(index)
+
+
 def there_and_back(scans: Iterable[LaserScan], passes: int) -> Iterator[LaserScan]:
     """The log driven ``passes`` times: forward, backward (the scans in reverse order, time
-    mirrored), forward, ... A long log from a short one, for memory (the scans are held)."""
+    mirrored), forward, ... (:func:`pass_stamps`). A long log from a short one, for memory
+    (the scans are held)."""
     from dataclasses import replace
 
     first = list(scans)
-    yield from first
-    t0, t1 = first[0].stamp_s, first[-1].stamp_s
-    span = t1 - t0 + 0.1
-    for k in range(1, passes):
-        order = first[::-1] if k % 2 else first
-        for rec in order:
-            t = (t1 + (t1 - rec.stamp_s)) if k % 2 else rec.stamp_s
-            yield replace(rec, stamp_s=t + (k - (k % 2)) * span + (0.1 if k % 2 else 0.0))
+    stamps, index = pass_stamps(np.array([rec.stamp_s for rec in first]), passes)
+    for t, i in zip(stamps, index, strict=True):
+        yield replace(first[i], stamp_s=float(t))
 
 
 def fault_spec(text: str) -> str:
@@ -265,7 +280,7 @@ def run_case(
     if rel_path is not None:
         rel = load_relations(root / rel_path)
     elif path.suffix == ".mcap":
-        rel = truth_relations(path)
+        rel = truth_relations(path, passes=passes)
     if rel is not None:
         err = evaluate_relations(Trajectory(t, poses), rel)
         out["slam_m"] = err.translation_mean_m

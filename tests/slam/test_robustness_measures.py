@@ -85,3 +85,17 @@ def test_faults_combine_with_plus_and_a_wrong_one_is_named(
         bench.main(["--faults", "scale+fast", "--logs"])
     err = capsys.readouterr().err
     assert "fault 'fast' in 'scale+fast'" in err and "freeze-turn" in err
+
+
+def test_pass_stamps_drive_the_log_there_and_back() -> None:
+    # a log stamped 10, 11, 13 (span 3 + 0.1 s): the second pass runs the scans backwards
+    # mirrored about 13 and 0.1 s after it (13.1, 15.1, 16.1), the third forwards one span
+    # after the first's stamps (16.2, 17.2, 19.2); the fourth mirrors again
+    bench = _bench()
+    t, k = bench.pass_stamps(np.array([10.0, 11.0, 13.0]), 4)
+    np.testing.assert_allclose(t[:9], [10, 11, 13, 13.1, 15.1, 16.1, 16.2, 17.2, 19.2])
+    np.testing.assert_allclose(t[9:], [19.3, 21.3, 22.3])
+    assert k.tolist() == [0, 1, 2, 2, 1, 0, 0, 1, 2, 2, 1, 0]
+    assert np.all(np.diff(t) > 0)
+    t1, k1 = bench.pass_stamps(np.array([10.0, 11.0, 13.0]), 1)
+    assert t1.tolist() == [10.0, 11.0, 13.0] and k1.tolist() == [0, 1, 2]

@@ -408,6 +408,7 @@ class Tracker:
         self.poor = 0  # scans in a row that fit under retry_score
         # the last scan was lost and fit under lost_score, best outside the narrow window
         self.unmatched = False
+        self.held = False  # the last scan's narrow match was held back (match)
         self._lost = 0
         # J^T J of the last scan's match (local frame; :func:`~.scan_matching.match_hessian`),
         # None when it was not matched: how sharply the scan placed itself, per direction
@@ -454,10 +455,12 @@ class Tracker:
         (``unmatched_hold_scans``). The heading window also grows with the turn the prediction
         makes, by odometry's learnt error per radian turned
         (:meth:`~.fusion.OdometryFusion.estimate_turn_ratio`). A match that refutes odometry
-        is kept as it is; otherwise it is fused with the prediction. ``ang_step`` (rad) is the
-        angular search step."""
+        is kept as it is; otherwise it is fused with the prediction. A narrow match held back
+        on the window's edge by the last keyframe's samples (:meth:`_held`) is refined from the
+        prediction instead and not learnt from (``held``). ``ang_step`` (rad) is the angular
+        search step."""
         guess = guesses[0]
-        self.doubted = self.odom_suspect = self.unmatched = False
+        self.doubted = self.odom_suspect = self.unmatched = self.held = False
         self.hessian = None
         if not self.active:
             return guess, 0.0
@@ -494,6 +497,11 @@ class Tracker:
             w_lin,
             w_ang,
         )
+        # a narrow match held back by the last keyframe (_held): not a measurement; refined
+        # from the prediction instead, and not learnt from
+        self.held = score >= cfg.retry_score and self._held(s, points, pose, score, guess, win_m)
+        if self.held:
+            pose = guess.copy()
         if score < cfg.retry_score:
             wide, wide_score = guess, -1.0
             # the prediction the scan fits best at its centre first; another's window wins
@@ -559,8 +567,39 @@ class Tracker:
         self.hessian = sm.match_hessian(s.likelihood, s.ox, s.oy, res, points, pose)
         if self.fusion is not None and not self.doubted:
             step = between(self.pose, guess) if self.pose is not None else None
-            pose = self.fusion.fuse(guess, pose, self.hessian, step)
+            pose = self.fusion.fuse(guess, pose, self.hessian, step, learn=not self.held)
         return pose, score
+
+    def _held(
+        self, s: Submap, points: F64, pose: F64, score: float, guess: F64, win_m: float
+    ) -> bool:
+        """Whether a narrow match ``pose`` (score ``score``) about the prediction ``guess``
+        was held back by the last keyframe's samples rather than placed by the walls: it lies
+        on the translation window's edge (whole cells, ``win_m`` half-width) towards the last
+        scan's pose, the scan fits there (standing still, at the match's heading) at least as
+        well, and it fits the prediction well enough not to be searched again
+        (``retry_score``).
+
+        A keyframe's point samples (a wall's beams metres apart) are where the next scans'
+        samples, on the same beams, fit best with the robot not moved; between sparse scans
+        that pull reaches the window's edge, and a match left there each scan taught the
+        fusion that odometry was off by the shortfall: the learnt noise grew, the windows
+        with it, until the samples held tracking on its keyframes (a simulated hospital driven
+        six times at 1.4 Hz, issue 19's fourteenth round). Odometry that really was off (a
+        slip, a lag) leaves the prediction fitting clearly worse, and a robot that stood still
+        while its wheels turned fits poorly there too."""
+        if self.pose is None:
+            return False
+        res = self.cfg.resolution_m
+        off = pose[:2] - guess[:2]
+        edge = math.ceil(win_m / res) * res - 0.5 * res
+        ahead = guess[:2] - self.pose[:2]
+        if np.max(np.abs(off)) < edge or float(off @ ahead) >= 0.0:
+            return False
+        still = np.array([self.pose[0], self.pose[1], pose[2]])
+        at_still = sm.score_pose(s.likelihood, s.ox, s.oy, res, points, still)
+        at_guess = sm.score_pose(s.likelihood, s.ox, s.oy, res, points, guess)
+        return bool(at_still >= score and at_guess >= self.cfg.retry_score)
 
     def _relocalise(
         self, s: Submap, points: F64, guess: F64, ang_step: float, pose: F64, score: float

@@ -112,10 +112,13 @@ class OdometryFusion:
         s_o, s_m, k_rot, s_or = self._k
         return s_m, s_or * (1.0 - k_rot) / max(k_rot, 1e-12)
 
-    def fuse(self, guess: F64, match: F64, hessian: F64, step: F64 | None = None) -> F64:
-        """The fused pose; records ``match`` (call :meth:`add` with the odometry after).
-        ``step`` is the odometry increment behind ``guess`` (for the noise floors)."""
-        self._raw = np.asarray(match, np.float64).copy()
+    def fuse(
+        self, guess: F64, match: F64, hessian: F64, step: F64 | None = None, learn: bool = True
+    ) -> F64:
+        """The fused pose; records ``match`` unless ``learn`` is False (call :meth:`add`
+        with the odometry after). ``step`` is the odometry increment behind ``guess`` (for
+        the noise floors)."""
+        self._raw = np.asarray(match, np.float64).copy() if learn else None
         w, v = np.linalg.eigh(hessian[:2, :2])
         w = np.maximum(w, 0.0)
         self.sharp.append(float(math.sqrt(w[0] * w[1])))
