@@ -297,6 +297,37 @@ def test_finished_submap_keeps_only_its_occupied_cells() -> None:
     assert sub.ox == pytest.approx(live.ox) and sub.field().shape == expected.shape
 
 
+def _submap_spans(spacing_m: float, n: int) -> tuple[list[list[int]], list[int]]:
+    """Keyframes ``spacing_m`` apart along a corridor into a tracker with the defaults: each
+    submap's keyframes, and the keyframes at whose insertion a submap was finished."""
+    tracker = Tracker(TrackingConfig())
+    slam = GraphSlam(30.0)
+    finished_at = []
+    for node in range(n):
+        pose = np.array([1.5 + spacing_m * node, 1.5, 0.0])
+        _, ends, hits = slam.scan_points(cast(pose), ANGLES)
+        world = compose(pose, np.column_stack([ends, np.zeros(len(ends))]))[:, :2]
+        if tracker.insert(node, pose, pose[:2], world, hits):
+            finished_at.append(node)
+    return [s.nodes for s in tracker.submaps], finished_at
+
+
+def test_submaps_end_after_40_keyframes_or_8_m_of_path() -> None:
+    # 0.2 m apart (the motion filter's distance): 40 keyframes span 7.8 m, the count decides:
+    # a new submap every 20 keyframes, the first finished with its 40th (node 39)
+    nodes, finished_at = _submap_spans(0.2, 60)
+    assert nodes[0] == list(range(40)) and nodes[1][0] == 20 and nodes[2][0] == 40
+    assert finished_at == [39, 59]
+    # 0.5 m apart (sparse scans, every one a keyframe): the path decides. Submap 0 holds 4 m
+    # after node 8, so node 9 starts submap 1; it holds 8 m after node 16 and is finished
+    # then (17 keyframes, not 40); submap 1 reaches 4 m at node 17 (9..17), so node 18
+    # starts submap 2, and so on every 9 keyframes
+    nodes, finished_at = _submap_spans(0.5, 40)
+    assert nodes[0] == list(range(17))
+    assert [n[0] for n in nodes] == [0, 9, 18, 27, 36]
+    assert finished_at == [16, 25, 34]
+
+
 def test_pyramid_cache_stays_within_its_budget() -> None:
     sub, _ = finished_submap(np.array([[1.5 + 0.2 * k, 1.5, 0.0] for k in range(20)]))
     one = LoopDetector(LoopConfig(), 0.05).pyramid(sub).nbytes

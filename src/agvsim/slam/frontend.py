@@ -64,6 +64,12 @@ class TrackingConfig:
     fusion_window: int = 300  # scans the noise estimates look back over
     fusion_lag: int = 10  # scans between the two increments that separate the noises
     submap_keyframes: int = 40  # keyframes per submap
+    # ... or this much path between its keyframes, whichever comes first: 40 keyframes at the
+    # motion filter's 0.2 m. Between sparse scans every scan is a keyframe, 0.5 m or more
+    # apart, and 40 of them made submaps 20 m long that held a corner's heading error inside
+    # them, where no loop closure can mend it (a simulated hospital at 1.4 Hz: 4 deg at its
+    # first corner; issue 19's fourteenth round)
+    submap_length_m: float = 8.0
     submap_half_size_m: float = 45.0  # live submap grid: +- this around its origin
     surface_gap_m: float = 0.5  # neighbouring returns closer than this are joined in the field
     # long corridors beyond the scanner's reach (docs/slam.md, issue 19's eleventh and twelfth
@@ -259,6 +265,8 @@ class Submap:
     likelihood: F32  # likelihood field M for matching
     kernel: F32
     nodes: list[int] = field(default_factory=list)
+    path_m: float = 0.0  # the path between its keyframes (m)
+    last_xy: F64 | None = None  # the newest keyframe's position (local frame)
     finished: bool = False
     # a finished submap keeps only its occupied cells (row, column; int16), a few kB: its
     # likelihood field is a pure function of them and is rebuilt when loop closing needs it
@@ -321,6 +329,10 @@ class Submap:
                 pts = np.concatenate((pts, spread))
         stamp_points(self.likelihood, self.ox, self.oy, res, pts, self.kernel)
         self.nodes.append(node)
+        xy = np.array(sensor_xy[:2], dtype=np.float64)  # the sensor's path
+        if self.last_xy is not None:
+            self.path_m += math.hypot(xy[0] - self.last_xy[0], xy[1] - self.last_xy[1])
+        self.last_xy = xy
 
     def finish(self, cfg: TrackingConfig) -> None:
         """Crop to the mapped cells and keep only the occupied ones (:meth:`field`)."""
@@ -661,10 +673,11 @@ class Tracker:
         self, node: int, pose: F64, sensor_xy: F64, ends: F64, hits: NDArray[np.bool_]
     ) -> list[Submap]:
         """Insert a keyframe (local frame) into the active submaps, starting a new submap every
-        half ``submap_keyframes``; returns the submaps that got finished."""
+        half ``submap_keyframes`` or half ``submap_length_m`` of path, whichever comes first;
+        returns the submaps that got finished (full: either of the two)."""
         cfg = self.cfg
         half = max(cfg.submap_keyframes // 2, 1)
-        if not self.active or len(self.active[-1].nodes) >= half:
+        if not self.active or self._full(self.active[-1], half, 0.5 * cfg.submap_length_m):
             s = new_submap(len(self.submaps), pose, cfg, self.kernel)
             self.submaps.append(s)
             self.active.append(s)
@@ -672,11 +685,15 @@ class Tracker:
         for s in self.active:
             s.insert(cfg, sensor_xy, ends, hits, node, edge_on)
         done = []
-        if len(self.active[0].nodes) >= cfg.submap_keyframes:
+        if self._full(self.active[0], cfg.submap_keyframes, cfg.submap_length_m):
             first = self.active.pop(0)
             first.finish(cfg)
             done.append(first)
         return done
+
+    @staticmethod
+    def _full(s: Submap, keyframes: int, length_m: float) -> bool:
+        return len(s.nodes) >= keyframes or s.path_m >= length_m
 
     def finish_all(self) -> list[Submap]:
         done = [s for s in self.active if s.nodes]
