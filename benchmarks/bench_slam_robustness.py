@@ -11,7 +11,8 @@ prints
 * the mean translational error (m) of SLAM and of the faulty odometry alone on the relations
   whose two scans survived the fault (Kümmerle et al.), and their count; a simulated
   recording (``--mcap run.mcap``, from ``agvsim run``) is scored on relations drawn from its
-  ground truth (every scan with the scan 10 later and with a random one);
+  ground truth (every scan with the scan 10 later and with a random one; with ``--passes``,
+  over every pass);
 * SLAM's error over the unperturbed SLAM error of the same log (``/base``, target <= 1.5),
   the same ratio on only the relations both runs scored (``/same``: a fault that drops
   scans leaves a subset of the relations, whose unperturbed error differs from the whole
