@@ -191,6 +191,7 @@ class GraphSlam:
     def _reset(self) -> None:
         cfg = self.cfg
         self.tracker = Tracker(cfg.tracking)
+        self.tracker.sensor_xy = self.laser_offset[:2].copy()
         self.motion = MotionFilter(
             cfg.keyframe_distance_m, cfg.keyframe_angle_rad, cfg.keyframe_time_s
         )
@@ -261,6 +262,7 @@ class GraphSlam:
 
     def _step(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
         points, ends, hits = self.scan_points(ranges, angles)
+        self.tracker.view = self._view(angles)
         guesses = self.tracker.predict(odom_pose)
         self._odom = self.tracker.odom_now.copy()  # scale-corrected (odometry edges)
         pose, score = self.tracker.match(points, guesses, self.angular_step(points))
@@ -325,6 +327,18 @@ class GraphSlam:
         cells = np.floor(pts / res).astype(np.int64)
         _, first = np.unique(cells[:, 0] * 1_000_003 + cells[:, 1], return_index=True)
         return np.ascontiguousarray(pts[np.sort(first)]), ends.astype(np.float32), hit
+
+    def _view(self, angles: F64) -> tuple[float, float] | None:
+        """The scanner's field of view in the robot frame, first and last beam (rad); None
+        for a scanner that looks all round (a gap of at most two beam spacings)."""
+        a = np.asarray(angles, np.float64)
+        if len(a) < 2:
+            return None
+        lo, hi = float(np.min(a)), float(np.max(a))
+        if 2.0 * math.pi - (hi - lo) <= 2.0 * (hi - lo) / (len(a) - 1):
+            return None
+        yaw = float(self.laser_offset[2])
+        return lo + yaw, hi + yaw
 
     def angular_step(self, points: F64) -> float:
         """Search step that moves the scan's far points (98th percentile of the ranges, at least
