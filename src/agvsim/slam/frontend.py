@@ -148,6 +148,76 @@ class TrackingConfig:
     # search (20 cm cells; .relocalise), built once; 0: no global search over it
     global_cell_factor: int = 4
 
+    def __post_init__(self) -> None:
+        """A clear error for a value no tracking could run with (NaN fails every test)."""
+
+        def bad(name: str, allowed: str) -> ValueError:
+            return ValueError(
+                f"TrackingConfig.{name} must be {allowed}, got {getattr(self, name)!r}"
+            )
+
+        for name in _POSITIVE:
+            if not getattr(self, name) > 0:
+                raise bad(name, "positive")
+        for name in _NON_NEGATIVE:
+            if not getattr(self, name) >= 0:
+                raise bad(name, ">= 0")
+        for name in ("retry_score", "lost_score", "global_min_score"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise bad(name, "a mean likelihood in [0, 1]")
+        if self.lost_score > self.retry_score:
+            raise ValueError(
+                f"TrackingConfig.lost_score ({self.lost_score}) must not exceed retry_score "
+                f"({self.retry_score}): a lost scan is a poor one"
+            )
+        if self.observed_share is not None and not 0.0 < self.observed_share <= 1.0:
+            raise bad("observed_share", "in (0, 1] or None")
+        if self.edge_on_turn_rad is not None and not 0.0 < self.edge_on_turn_rad <= math.pi / 2:
+            raise bad("edge_on_turn_rad", "in (0, pi/2] or None")
+        if self.edge_on_max_step_m is not None and not self.edge_on_max_step_m > 0:
+            raise bad("edge_on_max_step_m", "positive or None")
+        if not self.l_miss < 0.0:
+            raise bad("l_miss", "negative (a ray through a cell: free)")
+
+
+# TrackingConfig's fields that must be above 0, and those that may be 0 as well
+_POSITIVE = (
+    "resolution_m",
+    "sigma_m",
+    "window_m",
+    "window_rad",
+    "wide_window_m",
+    "wide_window_rad",
+    "gn_iterations",
+    "fusion_window",
+    "fusion_lag",
+    "submap_keyframes",
+    "submap_length_m",
+    "submap_half_size_m",
+    "surface_gap_m",
+    "steps_kept",
+    "edge_on_reach_m",
+    "glimpse_depth_m",
+    "l_hit",
+    "l_clamp",
+    "lost_scans",
+    "relocalise_scans",
+    "relocalise_window_m",
+    "global_points",
+)
+_NON_NEGATIVE = (
+    "prior_lin_weight",
+    "prior_ang_weight",
+    "gn_prior_weight",
+    "odom_floor_m_per_m",
+    "odom_floor_rad_per_rad",
+    "odom_floor_rad_per_m",
+    "match_ceiling_m",
+    "match_ceiling_rad",
+    "unmatched_hold_scans",
+    "global_cell_factor",
+)
+
 
 @njit(cache=True)
 def densify_surface(
