@@ -172,6 +172,9 @@ def test_the_field_of_view_comes_from_the_beams() -> None:
     assert slam._view(wide) == pytest.approx((math.radians(-125.0), math.radians(145.0)))
     round_ = np.radians(np.arange(360.0) - 180.0)
     assert slam._view(round_) is None
+    # a rear scanner's beams given across the +-180 deg seam: read as all round
+    rear = np.radians(np.concatenate([np.arange(-180.0, -89.0), np.arange(90.0, 181.0)]))
+    assert slam._view(rear) is None
 
 
 def test_a_scan_mostly_in_unseen_space_keeps_every_point() -> None:

@@ -330,7 +330,9 @@ class GraphSlam:
 
     def _view(self, angles: F64) -> tuple[float, float] | None:
         """The scanner's field of view in the robot frame, first and last beam (rad); None
-        for a scanner that looks all round (a gap of at most two beam spacings)."""
+        for a scanner that looks all round (a gap of at most two beam spacings). Beams given
+        across the +-pi seam (a rear scanner's -180..-90 and 90..180 deg) read as all round:
+        no points are then left out (:meth:`~.frontend.Tracker.towards_blind_side`)."""
         a = np.asarray(angles, np.float64)
         if len(a) < 2:
             return None
