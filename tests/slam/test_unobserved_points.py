@@ -1,5 +1,5 @@
 """Scan points that land where the matched submap was never observed are left out of the
-match (:func:`agvsim.slam.mapping.observed_before`, ``TrackingConfig.observed_share``; issue
+match (:func:`agvsim.slam.scan_matching.observed_before`, ``TrackingConfig.observed_share``; issue
 19's fifteenth round): the submap ends where its scans saw, and a point just past that edge
 fits only with the scan moved back onto the last returns. A robot driving backwards with a
 front scanner sees each wall come into view beside it, and every match fell short: the
@@ -15,7 +15,7 @@ import pytest
 
 from agvsim.slam.frontend import Tracker, TrackingConfig
 from agvsim.slam.graph_slam import GraphSlam
-from agvsim.slam.mapping import observed_before
+from agvsim.slam.scan_matching import observed_before
 
 
 def _grid() -> np.ndarray:

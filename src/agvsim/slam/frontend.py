@@ -30,7 +30,6 @@ from agvsim.slam.mapping import (
     coarse_field,
     gaussian_kernel,
     likelihood_field,
-    observed_before,
     stamp_points,
     update_log_odds,
 )
@@ -102,7 +101,7 @@ class TrackingConfig:
     # scan points that land where the matched submap was never observed are left out of the
     # match while the robot moves where its scanner does not look (``Tracker.view``: a front
     # scanner driven backwards or sideways) and at least this share of the scan lands where
-    # it was (:func:`~.mapping.observed_before`, ``window_m`` short of each point; fewer: the
+    # it was (:func:`~.scan_matching.observed_before`, ``window_m`` short of each point; fewer: the
     # robot enters unmapped space and every point is matched). The submap ends where its
     # scans saw, and on the blind side walls come into view right beside the scanner: a
     # point just past that edge fits only with the scan moved back onto the last returns,
@@ -683,7 +682,7 @@ class Tracker:
             return points
         if not self.towards_blind_side(guess):
             return points
-        keep = observed_before(
+        keep = sm.observed_before(
             s.logodds,
             s.ox,
             s.oy,

@@ -28,7 +28,6 @@ __all__ = [
     "coarse_field",
     "gaussian_kernel",
     "likelihood_field",
-    "observed_before",
     "render_occupancy",
     "save_map_png",
     "save_ros_map",
@@ -37,45 +36,6 @@ __all__ = [
 ]
 
 F64 = NDArray[np.float64]
-
-
-@njit(cache=True)
-def observed_before(
-    logodds: np.ndarray,
-    ox: float,
-    oy: float,
-    res: float,
-    points: np.ndarray,
-    pose: np.ndarray,
-    origin: np.ndarray,
-    back_m: float,
-) -> np.ndarray:
-    """Which scan ``points`` (robot frame) placed at ``pose`` land where the grid has been
-    observed: the cell ``back_m`` short of each point on its ray from ``origin`` (the
-    sensor, robot frame) holds a log-odds other than 0 (0: never seen, or as much hit as
-    missed: probability 1/2). Short of the point, not at it: a point on a wall seen before
-    lies up to the pose's error behind that wall's cells, where no ray has reached; in front
-    of the wall the earlier rays swept the cells free. A point closer than ``back_m`` to the
-    sensor counts as observed."""
-    n = points.shape[0]
-    out = np.zeros(n, dtype=np.bool_)
-    h_, w_ = logodds.shape
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    sx = pose[0] + c * origin[0] - s * origin[1]
-    sy = pose[1] + s * origin[0] + c * origin[1]
-    for k in range(n):
-        px = pose[0] + c * points[k, 0] - s * points[k, 1]
-        py = pose[1] + s * points[k, 0] + c * points[k, 1]
-        r = math.hypot(px - sx, py - sy)
-        if r <= back_m:
-            out[k] = True
-            continue
-        f = (r - back_m) / r
-        ix = int(math.floor((sx + f * (px - sx) - ox) / res))
-        iy = int(math.floor((sy + f * (py - sy) - oy) / res))
-        if 0 <= ix < w_ and 0 <= iy < h_ and logodds[iy, ix] != 0.0:
-            out[k] = True
-    return out
 
 
 @njit(cache=True)

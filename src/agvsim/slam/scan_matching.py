@@ -36,6 +36,7 @@ __all__ = [
     "gauss_newton",
     "match_hessian",
     "max_pyramid",
+    "observed_before",
     "score_pose",
 ]
 
@@ -52,6 +53,43 @@ def _cell_value(grid: np.ndarray, iy: int, ix: int) -> float:
     if iy < 0 or ix < 0 or iy >= grid.shape[0] or ix >= grid.shape[1]:
         return 0.0
     return grid[iy, ix]
+
+
+@njit(cache=True)
+def observed_before(
+    logodds: np.ndarray,
+    ox: float,
+    oy: float,
+    res: float,
+    points: np.ndarray,
+    pose: np.ndarray,
+    origin: np.ndarray,
+    back_m: float,
+) -> np.ndarray:
+    """Which scan ``points`` (robot frame) placed at ``pose`` land where the grid has been
+    observed: the cell ``back_m`` short of each point on its ray from ``origin`` (the
+    sensor, robot frame) holds a log-odds other than 0 (0: never seen, or as much hit as
+    missed: probability 1/2). Short of the point, not at it: a point on a wall seen before
+    lies up to the pose's error behind that wall's cells, where no ray has reached; in front
+    of the wall the earlier rays swept the cells free. A point closer than ``back_m`` to the
+    sensor counts as observed."""
+    n = points.shape[0]
+    out = np.zeros(n, dtype=np.bool_)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    sx = pose[0] + c * origin[0] - s * origin[1]
+    sy = pose[1] + s * origin[0] + c * origin[1]
+    for k in range(n):
+        px = pose[0] + c * points[k, 0] - s * points[k, 1]
+        py = pose[1] + s * points[k, 0] + c * points[k, 1]
+        r = math.hypot(px - sx, py - sy)
+        if r <= back_m:
+            out[k] = True
+            continue
+        f = (r - back_m) / r
+        ix = int(math.floor((sx + f * (px - sx) - ox) / res))
+        iy = int(math.floor((sy + f * (py - sy) - oy) / res))
+        out[k] = _cell_value(logodds, iy, ix) != 0.0  # off the grid: 0, never seen
+    return out
 
 
 @njit(cache=True)
