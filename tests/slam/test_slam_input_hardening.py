@@ -230,3 +230,20 @@ def test_fuzzed_newer_records_give_a_result_or_a_clear_error(
     path = tmp_path / "fuzz.clf"
     path.write_bytes(mutate(carmen_newer_text(raw_only=raw_only).encode(), rng))
     assert_map_or_clear_error(path, tmp_path / "out")
+
+
+def test_a_scanner_mounted_off_the_robot_is_refused_naming_the_log(tmp_path: Path) -> None:
+    # the fuzz test's seed 1579444 left a PARAM line putting the scanner 1e9 m from the robot:
+    # every point then lay 1e9 m off, the angular search step rounded to 0 and the search
+    # divided by it
+    lines = carmen_text(12).splitlines(keepends=True)
+    k = next(i for i, line in enumerate(lines) if line.startswith("FLASER"))
+    parts = lines[k].split()
+    parts[2 + int(parts[1])] = "1e9"  # the laser's x: FLASER n r1..rn lx ly lth x y th ...
+    lines[k] = " ".join(parts) + "\n"
+    text = "".join(lines)
+    path = tmp_path / "far_mount.clf"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=r"far_mount\.clf: the scanner's mount pose .* not on"):
+        run_offline(path, tmp_path / "out")
+    assert_map_or_clear_error(path, tmp_path / "out2")

@@ -12,6 +12,7 @@ own recordings are read by :mod:`agvsim.record.scan_log`, in the layer above, wh
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
@@ -21,7 +22,7 @@ from typing import Protocol
 import numpy as np
 
 from agvsim.scan import LaserScan
-from agvsim.slam.carmen import CarmenLog
+from agvsim.slam.carmen import CarmenFormatError, CarmenLog
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
 from agvsim.slam.mapping import save_map_png, save_ros_map
 
@@ -109,6 +110,13 @@ def map_scans(
         if rec.odom_pose is None:
             raise ValueError(f"the scan at {rec.stamp_s} s has no odometry pose (odom_pose)")
         if slam is None:
+            mount = np.asarray(rec.mount_pose, np.float64)
+            reach = (config or SlamConfig()).usable_range_m
+            if not np.all(np.isfinite(mount)) or math.hypot(mount[0], mount[1]) > reach:
+                raise ValueError(
+                    f"the scanner's mount pose {mount.tolist()} is not on the robot: its "
+                    f"position must be finite and within {reach} m of the robot's"
+                )
             slam = GraphSlam(rec.range_max_m, rec.mount_pose, config)
         slam.update(rec.stamp_s, rec.ranges, rec.angles_rad, rec.odom_pose)
         n += 1
@@ -137,9 +145,16 @@ def run_offline(
     total = len(log) if max_scans is None else min(len(log), max_scans)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    slam = map_scans(
-        log, config, None if progress is None else lambda done: progress(done, total), total
-    )
+    try:
+        slam = map_scans(
+            log, config, None if progress is None else lambda done: progress(done, total), total
+        )
+    except CarmenFormatError:
+        raise  # names the file and the line
+    except ValueError as exc:
+        if str(source) in str(exc):
+            raise
+        raise ValueError(f"{source}: {exc}") from exc
     if slam is None:
         raise ValueError(f"{source}: the log holds no laser scans")
     n = len(slam.scan_times)
