@@ -457,8 +457,9 @@ class GraphSlam:
         refined there. Accepted only when the whole scan scores at least
         ``tracking.global_min_score``, better than at the tracked pose ``local`` (score
         ``local_score``) by ``doubt.margin``, and lies away from it (more than
-        ``relocalise_window_m``: nearer, tracking's own search had its chance). Returns the
-        local pose and the submap, or None."""
+        ``relocalise_window_m``: nearer, tracking's own search had its chance), where
+        odometry allows (:meth:`_odometry_allows`). Returns the local pose and the submap, or
+        None."""
         cfg = self.cfg.tracking
         finished = [s for s in self.tracker.submaps if s.finished]
         if not finished or len(points) < 3:
@@ -490,7 +491,7 @@ class GraphSlam:
         if (
             score < max(cfg.global_min_score, local_score + cfg.doubt.margin)
             or math.hypot(d[0], d[1]) <= cfg.relocalise_window_m
-            or not self._heading_plausible(pose[2])
+            or not self._odometry_allows(pose)
         ):
             return None
         return pose, s.index
@@ -504,24 +505,37 @@ class GraphSlam:
         u, doubt = between(prev, self._odom), self.cfg.tracking.doubt
         return bool(math.hypot(u[0], u[1]) < doubt.moving_m and abs(u[2]) < doubt.moving_rad)
 
-    def _heading_plausible(self, heading: float) -> bool:
-        """Whether a global relocalisation's heading (local frame) is one odometry allows:
-        within ``doubt.gate_sigmas`` of the heading odometry has turned since the last scan
-        that fitted (its learnt per-scan variance times the scans since, at least
-        ``doubt.min_gate_rad``), or odometry reported standing still at one of the scans since
-        (:meth:`_odometry_still`; a robot carried off: its wheels saw nothing of it, so any
-        heading). A building of look-alike halves (corridors round a symmetric core) scores
-        as well 180 deg off; tracking that lost its place between sparse scans had odometry
-        turning all along."""
+    def _odometry_allows(self, pose: F64) -> bool:
+        """Whether a global relocalisation's pose (local frame) is one odometry allows: turned
+        and moved as odometry turned and moved since the last scan that fitted, within
+        ``doubt.gate_sigmas`` of its learnt per-scan noise times the scans since (heading at
+        least ``doubt.min_gate_rad``, position at least ``doubt.min_gate_m``), unless
+        odometry reported standing still at one of the scans since (:meth:`_odometry_still`;
+        a robot carried off: its wheels saw nothing of it, so any place and heading).
+
+        A building of look-alike halves (corridors round a symmetric core) scores as well 180
+        deg off; a row of look-alike offices scores as well one door further on (a simulated
+        office floor at 1 Hz was placed 4 m along its corridor, three poor scans after
+        leaving a room). Tracking that lost its place while odometry kept running had
+        odometry moving and turning all along."""
         if self._fit is None or self._froze:
             return True
         fit_pose, fit_odom = self._fit
         moved = between(fit_odom, self._odom)
+        expected = compose(fit_pose, moved)
         var = self.tracker.odometry_variance()
         doubt = self.cfg.tracking.doubt
-        sigma = math.sqrt(max(self._since_fit, 1) * var[1]) if var is not None else 0.0
-        gate = max(doubt.min_gate_rad, doubt.gate_sigmas * sigma)
-        return abs(wrap_scalar(heading - fit_pose[2] - moved[2])) <= gate
+        k = doubt.gate_sigmas
+        scans = max(self._since_fit, 1)
+        sigma_m = math.sqrt(scans * var[0]) if var is not None else 0.0
+        sigma_rad = math.sqrt(scans * var[1]) if var is not None else 0.0
+        gate_m = max(doubt.min_gate_m, k * sigma_m)
+        gate_rad = max(doubt.min_gate_rad, k * sigma_rad)
+        off = pose[:2] - expected[:2]
+        return bool(
+            math.hypot(off[0], off[1]) <= gate_m
+            and abs(wrap_scalar(pose[2] - expected[2])) <= gate_rad
+        )
 
     def relocation_closure(self, node: int, submap: int) -> list[LoopClosure]:
         """The edge that ties a keyframe found by :meth:`relocalise` to the submap it was
