@@ -1,5 +1,6 @@
 """Global relocalisation: a robot carried off (kidnapped) while its odometry sees nothing is
-found again in the submaps it mapped, and SLAM resumes there."""
+found again in the submaps it mapped, and SLAM resumes there; a place that odometry, running
+all along, rules out (a look-alike office one door on) is refused."""
 
 from __future__ import annotations
 
