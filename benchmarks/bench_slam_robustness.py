@@ -442,7 +442,7 @@ def main(argv: list[str] | None = None) -> int:
         for seed in range(args.seed, args.seed + (1 if f == "none" else args.seeds))
     ]
     print(
-        f"{'log':<18}{'fault':<13}{'seed':>5}{'scans':>6}{'kf':>6}{'loops':>6}{'reloc':>6}"
+        f"{'log':<20}{'fault':<13}{'seed':>5}{'scans':>6}{'kf':>6}{'loops':>6}{'reloc':>6}"
         f"{'SLAM m':>9}{'odom m':>9}"
         f"{'/base':>7}{'/same':>7}{'/kept':>7}{'/odom':>7}{'rel':>6}{'vsB m':>8}{'odom':>8}"
         f"{'RTx':>7}"
@@ -501,7 +501,7 @@ def main(argv: list[str] | None = None) -> int:
                     f"{float(r['revisit']):.3f} (odometry {float(r['revisit_odom']):.3f})"
                 )
             print(
-                f"{log:<18}{str(r['fault']):<13}{seed:>5d}{int(r['scans']):>6d}{int(r['keyframes']):>6d}"
+                f"{log:<20}{str(r['fault']):<13}{seed:>5d}{int(r['scans']):>6d}{int(r['keyframes']):>6d}"
                 f"{int(r['loops']):>6d}{int(r['reloc']):>6d}{score}{float(r['rt']):>7.1f}{float(r['cpu_s']):>8.1f}"
                 f"{float(r['wall_s']):>8.1f}{float(r['slam_mib']):>7.0f}"
                 f"{float(r['peak_mib']):>8.0f}",
@@ -509,7 +509,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     if args.seeds > 1:
         print(
-            f"\n{'log':<18}{'fault':<13}{'seeds':>6}  /base mean (worst)  /same mean (worst)  "
+            f"\n{'log':<20}{'fault':<13}{'seeds':>6}  /base mean (worst)  /same mean (worst)  "
             "/kept mean (worst)  /odom mean (worst)"
         )
         for (log, fault), vals in ratios.items():
@@ -517,7 +517,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             v = np.asarray(vals)
             cols = "".join(f"{np.mean(v[:, k]):>11.2f} ({np.max(v[:, k]):.2f}) " for k in range(4))
-            print(f"{log:<18}{fault:<13}{len(v):>6d}{cols}", flush=True)
+            print(f"{log:<20}{fault:<13}{len(v):>6d}{cols}", flush=True)
     return 0
 
 
