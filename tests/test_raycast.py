@@ -185,6 +185,29 @@ def test_origin_on_cell_boundaries():
     np.testing.assert_array_equal(caster.cast_single(7.5, 3.5, [0.0, 2.0], 5.0), 0.0)  # inside
 
 
+@pytest.mark.parametrize("side", [-1.0, 1.0])
+@pytest.mark.parametrize("drift", [-1.86e-12, 1.86e-12])
+def test_origin_a_hair_off_a_face_with_a_beam_a_hair_off_along_it(side, drift):
+    """A 40 m x 40 m room of 5 cm cells, walls one cell thick. An origin 3e-11 m beside the
+    face x = 1 (within the corner tolerance, so taken as on it) casts a beam a hair off due
+    north and south, and one beside the face y = 1 a beam a hair off due east: the walls are
+    15.45, 24.45 and 38.95 m away whichever way the beams drift. Before the fix a beam that
+    started a hair before the face and drifted across it read the distance to where it
+    crossed (16.1 m north): past the wall and out of the map. A simulated scanner driven
+    exactly along x = 50 in a warehouse put its centre beam's returns 2 to 10 m outside the
+    walls."""
+    cells = np.zeros((800, 800), dtype=bool)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = True
+    caster = RayCaster(OccupancyGrid(cells, 0.05, (0.0, 0.0)))
+    near = 1.0 + side * 3e-11
+    north = caster.cast_single(near, 24.5, [math.pi / 2 + drift], 30.0)[0]
+    south = caster.cast_single(near, 24.5, [-math.pi / 2 + drift], 30.0)[0]
+    east = caster.cast_single(1.0, near, [drift], 40.0)[0]
+    assert north == pytest.approx(39.95 - 24.5, abs=1e-9)
+    assert south == pytest.approx(24.5 - 0.05, abs=1e-9)
+    assert east == pytest.approx(39.95 - 1.0, abs=1e-9)
+
+
 def test_diagonal_through_corner_of_two_walls_is_a_hit():
     # walls (3, 2) and (2, 3) share the corner (3, 3); the free cells (2, 2) and (3, 3) meet there
     grid = with_walls(empty(), [(3, 2), (2, 3)])

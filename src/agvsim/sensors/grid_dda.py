@@ -3,12 +3,14 @@
 Cells are closed squares: a beam that grazes a wall face or passes exactly through a wall corner
 hits it, and a beam through the shared corner of two diagonal wall cells can never slip between
 them; "exactly" means within :func:`corner_eps` (``1e-12`` x the map's size) of the corner or
-face. The DDA runs in float64 over a copy of the grid padded with a ring of "outside" cells
-(:func:`pad_grid`: no bounds test per step); the distance returned is recomputed from the entry
-face of the hit cell, ``(ox + k * res - x) / cos(angle)``, so it does not accumulate rounding.
-Empty-space skipping (:func:`mark_empty_space`) lets the DDA jump across squares of free cells
-found by a chessboard distance transform; it visits the same hit cell, so results are identical.
-The entry point is :func:`grid_beams`, called by :mod:`agvsim.sensors.raycast` per sensor.
+face, and an origin that close to a face is cast from the face itself (``cast_sensor`` in
+:mod:`agvsim.sensors.raycast`). The DDA runs in float64 over a copy of the grid padded with a
+ring of "outside" cells (:func:`pad_grid`: no bounds test per step); the distance returned is
+recomputed from the entry face of the hit cell, ``(ox + k * res - x) / cos(angle)``, so it does
+not accumulate rounding. Empty-space skipping (:func:`mark_empty_space`) lets the DDA jump
+across squares of free cells found by a chessboard distance transform; it visits the same hit
+cell, so results are identical. The entry point is :func:`grid_beams`, called by
+:mod:`agvsim.sensors.raycast` per sensor.
 """
 
 from __future__ import annotations

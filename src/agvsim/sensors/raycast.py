@@ -183,7 +183,13 @@ def cast_sensor(table, bins, x0, y0, angles, r_max, skip, row):
                     row[:n] = 0.0
                     return
     boxes_for_sensor(row, dirs, n, uniform, angles[0], step, x0, y0, r_max, skip, bins)
-    grid_beams(table, x0, y0, (ix, onx, iy, ony, inside), eps, dirs, n, r_max, row)
+    # an origin taken as on a cell face (within eps) is cast from the face itself: the DDA walks
+    # the cells beyond the face, and a distance measured from the true origin, a hair before it,
+    # would count the beam as entering those cells only where it drifts across the face (a
+    # beam a hair off north from 3e-11 m west of a face read 16.1 m for a wall 15.45 m away)
+    xg = ox + ix * res if onx else x0
+    yg = oy + iy * res if ony else y0
+    grid_beams(table, xg, yg, (ix, onx, iy, ony, inside), eps, dirs, n, r_max, row)
 
 
 @njit(cache=True, parallel=True, fastmath=False, error_model="numpy")
