@@ -13,12 +13,14 @@ look alike, and between the uprights a scan sees through the racks.
 
 from __future__ import annotations
 
-import math
-import re
+import sys
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from scenario_route import write_route  # noqa: E402
 
 RES_M = 0.05
 WIDTH_M, HEIGHT_M = 60.0, 40.0
@@ -85,12 +87,7 @@ def main(root: Path = ROOT) -> None:
     route += [(4.0, north), (4.0, south), (aisle[1], south), (aisle[1], north)]
     route += [(aisle[5], north), (aisle[5], south), (east, south), (east, north)]
     route += [(aisle[3], north), (aisle[3], south), (3.0, south), (3.0, 12.0)]
-    path = root / "slam_warehouse.yaml"
-    head = re.split(r"(?m)^      points:.*\n", path.read_text())[0]
-    points = "".join(f"        - [{x:.2f}, {y:.2f}]\n" for x, y in route)
-    path.write_text(head + "      points:  # written by scripts/make_slam_warehouse.py\n" + points)
-    length = sum(math.dist(a, b) for a, b in zip(route[:-1], route[1:], strict=True))
-    print(f"wrote {root / 'slam_warehouse.png'} and {len(route)} waypoints ({length:.0f} m)")
+    write_route(root, "slam_warehouse", route, "make_slam_warehouse.py")
 
 
 if __name__ == "__main__":

@@ -14,11 +14,14 @@ slanted walls are in any grid map.
 from __future__ import annotations
 
 import math
-import re
+import sys
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from scenario_route import write_route  # noqa: E402
 
 RES_M = 0.05
 WIDTH_M, HEIGHT_M = 72.0, 51.0
@@ -124,17 +127,12 @@ def main(root: Path = ROOT) -> None:
     first += [A1, *visit(*doors[6]), B1, C1, *visit(*doors[9]), D1, *lobby, *visit(*doors[11]), A0]
     second = [(8.0, 8.0), A1, B1, C1, D1, (22.0, 40.5), (18.0, 40.5), (18.0, 36.5), E0, A0]
     third = [(8.0, 8.0), A1, B1, C1, D1, *lobby, A0, (10.0, 8.0)]
-    route: list[Point] = []
-    for p in first + second + third:
-        if not route or math.hypot(p[0] - route[-1][0], p[1] - route[-1][1]) > 1e-6:
-            route.append((float(p[0]), float(p[1])))
-    path = root / "slam_wings.yaml"
-    text = path.read_text()
-    head = re.split(r"(?m)^      points:.*\n", text)[0]
-    points = "".join(f"        - [{x:.2f}, {y:.2f}]\n" for x, y in route)
-    path.write_text(head + "      points:  # written by scripts/make_slam_wings.py\n" + points)
-    length = sum(math.dist(a, b) for a, b in zip(route[:-1], route[1:], strict=True))
-    print(f"wrote {root / 'slam_wings.png'} and {len(route)} waypoints ({length:.0f} m)")
+    write_route(
+        root,
+        "slam_wings",
+        [(float(x), float(y)) for x, y in first + second + third],
+        "make_slam_wings.py",
+    )
 
 
 if __name__ == "__main__":
