@@ -370,6 +370,20 @@ def map_consistency(slam) -> float:  # type: ignore[no-untyped-def]
     return hits / max(total, 1)
 
 
+def tracking_override(spec: str) -> tuple[str, object]:
+    """``FIELD=VALUE`` of ``--tracking``: VALUE read as a Python literal (``None``, ``0.3``,
+    ``True``); a field TrackingConfig lacks is refused by ``dataclasses.replace``."""
+    import ast
+
+    name, sep, value = spec.partition("=")
+    if not sep or not name:
+        raise ValueError(f"{spec!r} is not FIELD=VALUE")
+    try:
+        return name, ast.literal_eval(value)
+    except (ValueError, SyntaxError) as exc:
+        raise ValueError(f"{spec!r}: VALUE must be a number, True, False or None") from exc
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--logs", nargs="*", default=["aces", "intel"], choices=list(LOGS))
@@ -402,6 +416,13 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="spread edge-on samples while the scans move up to this, m (default 0.15)",
     )
+    ap.add_argument(
+        "--tracking",
+        nargs="*",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override TrackingConfig fields for an A/B run (occluded_reach_m=None)",
+    )
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument(
@@ -433,6 +454,15 @@ def main(argv: list[str] | None = None) -> int:
             SlamConfig().tracking, edge_on_max_step_m=args.edge_on_max_step
         )
         config = dataclasses.replace(SlamConfig(), tracking=tracking)
+    if args.tracking:
+        base_cfg = config if config is not None else SlamConfig()
+        try:
+            tracking = dataclasses.replace(
+                base_cfg.tracking, **dict(tracking_override(x) for x in args.tracking)
+            )
+        except (TypeError, ValueError) as exc:
+            ap.error(f"--tracking: {exc}")
+        config = dataclasses.replace(base_cfg, tracking=tracking)
     if args.seeds < 1:
         ap.error(f"--seeds must be at least 1, got {args.seeds}")
     cases = [

@@ -191,6 +191,7 @@ class GraphSlam:
     def _reset(self) -> None:
         cfg = self.cfg
         self.tracker = Tracker(cfg.tracking)
+        self.tracker.max_range_m = self.max_range_m
         self.tracker.sensor_xy = self.laser_offset[:2].copy()
         self.motion = MotionFilter(
             cfg.keyframe_distance_m, cfg.keyframe_angle_rad, cfg.keyframe_time_s

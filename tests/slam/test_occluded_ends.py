@@ -1,0 +1,241 @@
+"""Surfaces that go out of sight behind a nearer return (:func:`agvsim.slam.frontend.
+extend_occluded`): where a wall's returns stop because something nearer hides the rest, the
+live field continues the wall past that end, so the next scans' new points on it (seen a
+little farther on) are not pulled back onto the end; where the beam past the end goes on
+farther (a door jamb, a corner seen from outside), the wall ends there and is left alone."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from agvsim.slam.frontend import Tracker, TrackingConfig, extend_occluded, spread_last_sample
+from agvsim.slam.scan_matching import angular_step
+from agvsim.slam.se2 import between, compose
+
+from helpers import cast_segments
+
+STEP_M = 0.025
+REACH_M = 0.5
+FIT_M = 0.3
+
+
+def _extend(ends: np.ndarray, hits: np.ndarray | None = None) -> np.ndarray:
+    hits = np.ones(len(ends), bool) if hits is None else hits
+    return extend_occluded(ends, hits, np.zeros(2), 0.5, STEP_M, REACH_M, FIT_M, 0.05)
+
+
+def _wall(x0: float, x1: float, y: float, spacing: float = 0.1) -> np.ndarray:
+    x = np.arange(x0, x1 + 1e-9, spacing)
+    return np.column_stack([x, np.full(x.size, y)])
+
+
+def test_a_wall_hidden_by_a_nearer_post_is_continued_behind_it() -> None:
+    # the wall y = 5 seen from x = -1 to 0 (11 returns 0.1 m apart), then a post at (0.1, 2):
+    # 2.0 m off, nearer than the wall's end (5.0 m), 3.0 m from it. The wall goes on behind
+    # the post: 20 points every 2.5 cm along +x, (0.025, 5) ... (0.5, 5). Its other end has
+    # no beam before it (the scan's first): not continued, nor is the post (one return)
+    ends = np.vstack([_wall(-1.0, 0.0, 5.0), [[0.1, 2.0]]])
+    pts = _extend(ends)
+    assert len(pts) == 20
+    np.testing.assert_allclose(pts[:, 1], 5.0, atol=1e-12)
+    np.testing.assert_allclose(pts[:, 0], STEP_M * np.arange(1, 21), atol=1e-12)
+
+
+def test_the_same_wall_in_reverse_beam_order_is_continued_the_other_way() -> None:
+    ends = np.vstack([[[0.1, 2.0]], _wall(-1.0, 0.0, 5.0)[::-1]])
+    pts = _extend(ends)
+    # the run's end next to the post is now its first return, (0, 5); the continuation runs
+    # away from the rest of the wall, +x
+    assert len(pts) == 20
+    np.testing.assert_allclose(pts[:, 0], STEP_M * np.arange(1, 21), atol=1e-12)
+
+
+def test_a_wall_that_ends_at_a_door_jamb_is_not_continued() -> None:
+    # past the wall's end the next beam meets a room's back wall 9 m off, farther than the
+    # end: the wall ends there (the jamb), and the beam went on through the door
+    ends = np.vstack([_wall(-1.0, 0.0, 5.0), [[0.2, 9.0]]])
+    assert len(_extend(ends)) == 0
+    # nor past a beam that returned nothing
+    ends = np.vstack([_wall(-1.0, 0.0, 5.0), [[0.1, 2.0]]])
+    hits = np.ones(len(ends), bool)
+    hits[-1] = False
+    assert len(_extend(ends, hits)) == 0
+
+
+def test_a_run_shorter_than_its_fit_length_is_not_continued() -> None:
+    # three returns 0.1 m apart span 0.2 m, under the 0.3 m over which the direction is taken
+    ends = np.vstack([_wall(-0.2, 0.0, 5.0), [[0.1, 2.0]]])
+    assert len(_extend(ends)) == 0
+    # four span 0.3 m: continued
+    ends = np.vstack([_wall(-0.3, 0.0, 5.0), [[0.1, 2.0]]])
+    assert len(_extend(ends)) == 20
+
+
+def test_clutter_is_not_continued() -> None:
+    # the same wall with its last return but one 6 cm off the line (a chair's leg
+    # against it): farther than a cell (5 cm) from the chord over the last 0.3 m, so the run
+    # is no straight surface and its direction says nothing; 4 cm off, it is continued
+    for off, want in ((0.06, 0), (0.04, 20)):
+        wall = _wall(-1.0, 0.0, 5.0)
+        wall[-2, 1] -= off
+        ends = np.vstack([wall, [[0.1, 2.0]]])
+        assert len(_extend(ends)) == want, off
+
+
+def test_the_continuation_stops_in_front_of_what_hides_it() -> None:
+    # a wall running towards the scanner, (-1, 3) to (0, 2), direction (1, -1)/sqrt 2, hidden
+    # by a return 1.8 m off. Point i of the continuation is (a, 2 - a), a = i 0.025/sqrt 2,
+    # at range sqrt(a^2 + (2 - a)^2); that is 1.8 m at a = (4 - sqrt(9.92)) / 4 = 0.21260,
+    # between i = 12 (a = 0.21213) and 13: 12 points lie behind the hiding return
+    a = np.linspace(-1.0, 0.0, 11)
+    wall = np.column_stack([a, 2.0 - a])
+    hider = 1.8 * np.array([[math.cos(math.radians(60.0)), math.sin(math.radians(60.0))]])
+    ends = np.vstack([wall, hider])
+    assert np.hypot(*(hider[0] - wall[-1])) > 0.5  # not joined to the wall
+    pts = _extend(ends)
+    assert len(pts) == 12
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    assert r.min() > 1.8 and np.all(np.diff(r) < 0)
+    np.testing.assert_allclose(pts[:, 0] + pts[:, 1], 2.0, atol=1e-12)  # on the wall's line
+
+
+def test_tracking_config_refuses_a_reach_that_is_not_positive() -> None:
+    assert TrackingConfig(occluded_reach_m=0.5).occluded_reach_m == 0.5
+    for bad in (0.0, -0.5, float("nan")):
+        with pytest.raises(ValueError, match="occluded_reach_m"):
+            TrackingConfig(occluded_reach_m=bad)
+    with pytest.raises(ValueError, match="occluded_fit_m"):
+        TrackingConfig(occluded_fit_m=0.0)
+
+
+def _beams(deg: list[float], y: float) -> np.ndarray:
+    """Returns on the wall ``y`` (y > 0: left) of beams at ``deg`` from the origin."""
+    a = np.radians(np.asarray(deg, float))
+    r = y / np.sin(a)
+    return np.column_stack([r * np.cos(a), r * np.sin(a)])
+
+
+def _last(ends: np.ndarray, hits: np.ndarray) -> np.ndarray:
+    return spread_last_sample(ends, hits, np.zeros(2), 0.5, STEP_M, REACH_M, 30.0)
+
+
+def test_the_farthest_sample_of_a_wall_beyond_the_range_is_spread_both_ways() -> None:
+    # a corridor 2.5 m wide: the left wall y = 1.25 returns on beams 3-6 deg (23.85, 17.88,
+    # 14.29 and 11.89 m along it), beam 2 deg would meet it 35.8 m off, beyond the 30 m range,
+    # and returned nothing, as the beams down to -2 deg did (dropped from the scan); -3 deg
+    # meets the right wall. The 3 deg sample is the wall's last: 0.5 m towards the 4 deg one
+    # (half the 5.97 m gap is more) and 0.5 m on, 20 points each way every 2.5 cm
+    ends = np.vstack([_beams([-4.0, -3.0], -1.25), _beams([3.0, 4.0, 5.0, 6.0], 1.25)])
+    hits = np.ones(len(ends), bool)
+    pts = _last(ends, hits)
+    left = pts[pts[:, 1] > 0]
+    np.testing.assert_allclose(left[:, 1], 1.25, atol=1e-9)
+    x3 = 1.25 / math.tan(math.radians(3.0))
+    np.testing.assert_allclose(
+        np.sort(left[:, 0] - x3), STEP_M * np.r_[-np.arange(20, 0, -1), np.arange(1, 21)], atol=1e-9
+    )
+    # the right wall's -3 deg sample is its last too (-4 deg its next), mirrored; nothing else
+    right = pts[pts[:, 1] < 0]
+    assert len(right) == 40 and len(pts) == 80
+    np.testing.assert_allclose(right[:, 1], -1.25, atol=1e-9)
+
+
+def test_a_silent_beam_given_as_a_miss_counts_as_a_dropped_one() -> None:
+    # CARMEN logs give a beam with no return at the maximum range: the 2 deg beam as a miss
+    # 30 m along it (not a hit) reads as the beams dropped above
+    ends = np.vstack(
+        [
+            [[30 * math.cos(math.radians(2.0)), 30 * math.sin(math.radians(2.0))]],
+            _beams([3.0, 4.0, 5.0], 1.25),
+        ]
+    )
+    hits = np.array([False, True, True, True])
+    assert len(_last(ends, hits)) == 40
+
+
+def test_a_wall_that_ends_within_the_range_is_not_spread_past_its_last_sample() -> None:
+    # the wall y = 1.25 ends at x = 10: beam 7 deg would have met it 10.26 m off, well within
+    # the range, and returned nothing (a miss at 30 m): its silence says the wall ends there
+    ends = np.vstack(
+        [
+            [[30 * math.cos(math.radians(7.0)), 30 * math.sin(math.radians(7.0))]],
+            _beams([8.0, 9.0, 10.0], 1.25),
+        ]
+    )
+    hits = np.array([False, True, True, True])
+    assert len(_last(ends, hits)) == 0
+    # and a sample whose neighbours both returned is spread_edge_on's, not this one's
+    assert len(_last(_beams([3.0, 4.0, 5.0], 1.25), np.ones(3, bool))) == 0
+
+
+def _junction(angle_deg: float) -> np.ndarray:
+    """A 2.2 m corridor along +x (walls y = +-1.1, shifted a quarter cell off the grid's
+    faces) and a wing leaving it at ``angle_deg`` to the left, 25 m long, the corridor closed
+    at x = -30: wall segments (x0, y0, x1, y1)."""
+    a, h = math.radians(angle_deg), 1.1
+    d = np.array([math.cos(a), math.sin(a)])
+    n = np.array([-d[1], d[0]])
+    inner = n * h + d * ((h - n[1] * h) / d[1])  # on y = h
+    outer = -n * h + d * ((-h + n[1] * h) / d[1])  # on y = -h
+    walls = np.array(
+        [
+            [-30.0, -h, *outer],
+            [*outer, *(outer + 25.0 * d)],
+            [-30.0, h, *inner],
+            [*inner, *(inner + 25.0 * d)],
+            [-30.0, -h, -30.0, h],
+        ]
+    )
+    walls[:, [1, 3]] += 0.0125
+    return walls
+
+
+def _approach_heading_error_deg(cfg: TrackingConfig, walls: np.ndarray) -> float:
+    """Mean heading error (deg) of matching a scan 0.15 m past the last of 11 keyframes 0.2 m
+    apart, the robot 6.5 to 2 m before the corner, the prediction exact and no prior: what
+    the field alone makes of the scan."""
+    angles = np.radians(np.arange(-90.0, 91.0, 1.0))
+
+    def scan(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r = cast_segments(pose, walls, angles)
+        keep = np.isfinite(r)
+        hit = r[keep] <= 30.0
+        rr = np.minimum(r[keep], 30.0)
+        a = angles[keep]
+        return np.column_stack([rr * np.cos(a), rr * np.sin(a)]), hit
+
+    errors = []
+    for x0 in np.arange(-6.5, -1.9, 0.5):
+        tracker = Tracker(cfg)
+        tracker.max_range_m = 30.0
+        for node, x in enumerate(np.arange(x0 - 2.0, x0 + 1e-9, 0.2)):
+            pose = np.array([x, 0.0, 0.0])
+            pts, hit = scan(pose)
+            world = compose(pose, np.column_stack([pts, np.zeros(len(pts))]))[:, :2]
+            tracker.insert(node, pose, pose[:2].copy(), world, hit)
+        tracker.pose = np.array([x0, 0.0, 0.0])
+        truth = np.array([x0 + 0.15, 0.0, 0.0])
+        pts, hit = scan(truth)
+        est, _ = tracker.match(
+            np.ascontiguousarray(pts[hit]), [truth.copy()], angular_step(0.05, 30.0)
+        )
+        errors.append(between(truth, est)[2])
+    return math.degrees(float(np.mean(errors)))
+
+
+@pytest.mark.parametrize("angle_deg", [70.0, 110.0])
+def test_a_wing_coming_into_view_past_a_corner_no_longer_turns_the_match(angle_deg: float) -> None:
+    # the wing's outer wall comes into view past the corridor's inner corner as the robot
+    # drives up to it. With that wall's hidden end stamped as an end, each match turned by
+    # -0.050 deg (70 deg wing) and -0.072 deg (110 deg) on average, measured; continued
+    # behind the corner, +0.005 and +0.004 deg
+    walls = _junction(angle_deg)
+    before = TrackingConfig(fuse_odometry=False, prior_lin_weight=0.0, prior_ang_weight=0.0)
+    assert before.occluded_reach_m is None and not before.last_sample_spread  # the defaults
+    both = dataclasses.replace(before, occluded_reach_m=0.5, last_sample_spread=True)
+    assert _approach_heading_error_deg(before, walls) < -0.03
+    assert abs(_approach_heading_error_deg(both, walls)) < 0.015
