@@ -632,8 +632,8 @@ class Submap:
         pts = ends[hits]
         if cfg.surface_gap_m > 0:
             stamp, spread = hits, None
+            sensor = np.asarray(sensor_xy, np.float64).reshape(2)
             if cfg.edge_on_turn_rad is not None and edge_on:
-                sensor = np.asarray(sensor_xy, np.float64).reshape(2)
                 stamp = hits & ~glimpses(ends, hits, sensor, cfg.surface_gap_m, cfg.glimpse_depth_m)
                 gap, turn, reach = cfg.surface_gap_m, cfg.edge_on_turn_rad, cfg.edge_on_reach_m
                 spread = spread_edge_on(ends, hits, gap, 0.5 * res, turn, reach)
@@ -646,7 +646,6 @@ class Submap:
             if spread is not None:
                 pts = np.concatenate((pts, spread))
             if cfg.occluded_reach_m is not None and edge_on:
-                sensor = np.asarray(sensor_xy, np.float64).reshape(2)
                 hidden = extend_occluded(
                     ends,
                     hits,
