@@ -23,9 +23,23 @@ REACH_M = 0.5
 FIT_M = 0.3
 
 
-def _extend(ends: np.ndarray, hits: np.ndarray | None = None) -> np.ndarray:
+RES_M = 0.05
+_LENGTHS = (STEP_M, REACH_M, FIT_M, 0.5 * RES_M)  # step, reach, fit, rms at most
+
+
+def _extend(
+    ends: np.ndarray,
+    hits: np.ndarray | None = None,
+    logodds: np.ndarray | None = None,
+    free_lo: float = -0.8,
+) -> np.ndarray:
+    """The continuation over a log-odds grid of 5 cm cells, corner (-2, 0), 4 m x 6 m; by
+    default nothing of it seen yet."""
     hits = np.ones(len(ends), bool) if hits is None else hits
-    return extend_occluded(ends, hits, np.zeros(2), 0.5, STEP_M, REACH_M, FIT_M, 0.05)
+    logodds = np.zeros((120, 80), np.float32) if logodds is None else logodds
+    return extend_occluded(
+        ends, hits, np.zeros(2), 0.5, *_LENGTHS, logodds, -2.0, 0.0, RES_M, free_lo
+    )
 
 
 def _wall(x0: float, x1: float, y: float, spacing: float = 0.1) -> np.ndarray:
@@ -76,14 +90,93 @@ def test_a_run_shorter_than_its_fit_length_is_not_continued() -> None:
 
 
 def test_clutter_is_not_continued() -> None:
-    # the same wall with its last return but one 6 cm off the line (a chair's leg
-    # against it): farther than a cell (5 cm) from the chord over the last 0.3 m, so the run
-    # is no straight surface and its direction says nothing; 4 cm off, it is continued
-    for off, want in ((0.06, 0), (0.04, 20)):
+    # the wall's returns alternately 3 cm in front of and behind it (a shelf of boxes): 3 cm
+    # rms off the line fitted over the last 0.3 m, over half a cell (2.5 cm), so the run is
+    # no straight surface and its direction says nothing; 2 cm (a wall under a scanner's
+    # range noise) is continued
+    for off, want in ((0.03, 0), (0.02, 20)):
         wall = _wall(-1.0, 0.0, 5.0)
-        wall[-2, 1] -= off
+        wall[:, 1] += off * (-1.0) ** np.arange(len(wall))
         ends = np.vstack([wall, [[0.1, 2.0]]])
         assert len(_extend(ends)) == want, off
+
+
+def test_a_run_round_a_corner_is_continued_along_its_last_leg() -> None:
+    # a run that bends 0.4 m before its end: (-1.5, 4.6) .. (-0.4, 4.6), then on to (0, 5)
+    # at 45 deg. Its last 0.3 m (reached at the fourth return back, 0.42 m) lie on that leg:
+    # the continuation runs on at 45 deg from (0, 5)
+    first = np.column_stack([np.arange(-1.5, -0.4 + 1e-9, 0.1), np.full(12, 4.6)])
+    t = np.arange(1, 5) * 0.1
+    leg = np.column_stack([-0.4 + t, 4.6 + t])
+    ends = np.vstack([first, leg, [[0.3, 2.0]]])
+    pts = _extend(ends)
+    assert len(pts) == 20
+    np.testing.assert_allclose(pts[:, 1] - pts[:, 0], 5.0, atol=1e-9)  # on y = x + 5
+    np.testing.assert_allclose(pts[:, 0], STEP_M / math.sqrt(2) * np.arange(1, 21), atol=1e-9)
+
+
+def test_the_continuation_stops_where_the_grid_saw_free_space() -> None:
+    # the wall y = 5 ends at x = -0.01; the cells of x in [0.30, 0.45), y in [4.95, 5.10)
+    # (columns 46-48, rows 99-101 of the grid whose corner is (-2, 0)) were seen free by rays
+    # through them before. Points run every 2.5 cm from x = 0.015; the first whose cell and
+    # its eight neighbours were all seen free is the 15th (x = 0.365, column 47): 14 points.
+    # A block missed once (-0.4, above -0.8) does not stop it, nor a single free cell (a
+    # ray grazing the wall's line)
+    ends = np.vstack([_wall(-1.01, -0.01, 5.0), [[0.1, 2.0]]])
+    for lo, want in ((-1.2, 14), (-0.4, 20)):
+        grid = np.zeros((120, 80), np.float32)
+        grid[99:102, 46:49] = lo
+        pts = _extend(ends, logodds=grid)
+        assert len(pts) == want, lo
+        np.testing.assert_allclose(pts[:, 0], -0.01 + STEP_M * np.arange(1, want + 1), atol=1e-9)
+    grid = np.zeros((120, 80), np.float32)
+    grid[100, 40:60] = -4.0
+    assert len(_extend(ends, logodds=grid)) == 20
+    # without the check (None: -inf), it runs the whole 0.5 m
+    grid[95:105, 40:60] = -4.0
+    assert len(_extend(ends, logodds=grid)) < 20
+    assert len(_extend(ends, logodds=grid, free_lo=-math.inf)) == 20
+
+
+def _scan_ends(walls: np.ndarray, step_deg: float) -> np.ndarray:
+    """The returns of beams every ``step_deg`` over 0-180 deg from the origin, beams that
+    meet no wall dropped."""
+    angles = np.radians(np.arange(0.0, 180.0 + 1e-9, step_deg))
+    r = cast_segments(np.zeros(3), walls, angles)
+    keep = np.isfinite(r)
+    a, rr = angles[keep], r[keep]
+    return np.column_stack([rr * np.cos(a), rr * np.sin(a)])
+
+
+def test_a_wall_that_ends_in_a_concave_corner_is_not_continued() -> None:
+    # the wall y = 5 (x <= 0.3) meets the wall x = 0.3 (y from 2 to 5) in a corner open
+    # towards the sensor at the origin; beams every 1.5 deg. The 85.5 deg beam meets x = 0.3
+    # at y = 3.81, nearer than the 87 deg return on y = 5 (x = 0.262) and 1.19 m from it: the
+    # first wall's end looks hidden, but the 84 deg return (y = 2.85) puts the hiding wall on
+    # the line x = 0.3, 0.038 m from that end, within its sample spacing (0.131 m) and a
+    # cell: the walls meet there, and continued the first would run into the second
+    corner = np.array([[-3.0, 5.0, 0.3, 5.0], [0.3, 5.0, 0.3, 2.0]])
+    ends = _scan_ends(corner, 1.5)
+    assert len(_extend(ends)) == 0
+    # the check off (as before): continued 0.5 m on along y = 5, into the second wall
+    hits = np.ones(len(ends), bool)
+    grid = np.zeros((120, 80), np.float32)
+    pts = extend_occluded(
+        ends, hits, np.zeros(2), 0.5, *_LENGTHS, grid, -2.0, 0.0, RES_M, -0.8, False
+    )
+    assert len(pts) == 20 and pts[:, 0].max() > 0.7
+    np.testing.assert_allclose(pts[:, 1], 5.0, atol=1e-6)
+    # a nearer wall that stands apart (x = 0.9, y from 2 to 4) hides part of y = 5. The left
+    # part's visible end (x = 1.063) lies 0.163 m off that wall's line, within its spacing
+    # and a cell, but the 78 deg beam to it would have met x = 0.9 at y = 4.23, short of it:
+    # that wall stops before, its top end is what hides, and both parts of y = 5 are continued
+    # into its shadow (the right part's end, x = 2.25, from the 65.8 deg beam's side)
+    apart = np.array([[-3.0, 5.0, 6.0, 5.0], [0.9, 4.0, 0.9, 2.0]])
+    pts = _extend(_scan_ends(apart, 1.5))
+    assert len(pts) == 40
+    np.testing.assert_allclose(pts[:, 1], 5.0, atol=1e-6)
+    left = np.sort(pts[pts[:, 0] < 1.7, 0])
+    np.testing.assert_allclose(left, 1.0627828 + STEP_M * np.arange(1, 21), atol=1e-6)
 
 
 def test_the_continuation_stops_in_front_of_what_hides_it() -> None:
@@ -110,6 +203,10 @@ def test_tracking_config_refuses_a_reach_that_is_not_positive() -> None:
             TrackingConfig(occluded_reach_m=bad)
     with pytest.raises(ValueError, match="occluded_fit_m"):
         TrackingConfig(occluded_fit_m=0.0)
+    for bad in (0.0, 0.8, float("nan")):
+        with pytest.raises(ValueError, match="occluded_free_logodds"):
+            TrackingConfig(occluded_free_logodds=bad)
+    assert TrackingConfig(occluded_free_logodds=None).occluded_free_logodds is None
 
 
 def _beams(deg: list[float], y: float) -> np.ndarray:
@@ -232,10 +329,13 @@ def test_a_wing_coming_into_view_past_a_corner_no_longer_turns_the_match(angle_d
     # the wing's outer wall comes into view past the corridor's inner corner as the robot
     # drives up to it. With that wall's hidden end stamped as an end, each match turned by
     # -0.050 deg (70 deg wing) and -0.072 deg (110 deg) on average, measured; continued
-    # behind the corner, +0.005 and +0.004 deg
+    # behind the corner, +0.005 and +0.004 deg, and the same with the farthest samples
+    # spread as well
     walls = _junction(angle_deg)
     before = TrackingConfig(fuse_odometry=False, prior_lin_weight=0.0, prior_ang_weight=0.0)
     assert before.occluded_reach_m is None and not before.last_sample_spread  # the defaults
-    both = dataclasses.replace(before, occluded_reach_m=0.5, last_sample_spread=True)
+    alone = dataclasses.replace(before, occluded_reach_m=0.5)
+    both = dataclasses.replace(alone, last_sample_spread=True)
     assert _approach_heading_error_deg(before, walls) < -0.03
+    assert abs(_approach_heading_error_deg(alone, walls)) < 0.015
     assert abs(_approach_heading_error_deg(both, walls)) < 0.015

@@ -96,16 +96,20 @@ class TrackingConfig:
     edge_on_reach_m: float = 0.5
     # off by default (measured, docs/slam.md, "Surfaces that go out of sight"): while the
     # scans come densely (as edge-on samples are spread), a surface whose end a nearer return
-    # hides is continued this far past it in the live field, in the direction of its last
-    # occluded_fit_m (:func:`extend_occluded`; None: not), and with last_sample_spread the
-    # farthest edge-on sample of a wall whose continuation lies beyond the range is spread
-    # both ways (:func:`spread_last_sample`; False: left a bump). Both ends are where a
-    # surface went out of sight, not where it ends: stamped, they pull the next scans' new
-    # returns back onto them (a corner bringing a slanted wing into view turned the tracked
-    # heading by a degree). On: the slanted wings 0.110 -> 0.038 m, but Intel at 1 Hz and
-    # the thesis maze's online run on seed 2 (0.022 -> 0.055 m) worse
+    # hides is continued this far past it in the live field, along the line fitted to its
+    # last occluded_fit_m, unless it ends in a concave corner against the surface that hides
+    # it (:func:`extend_occluded`; None: not), and with last_sample_spread the farthest
+    # edge-on sample of a wall whose continuation lies beyond the range is spread both ways
+    # (:func:`spread_last_sample`; False: left a bump). Both ends are where a surface went
+    # out of sight, not where it ends: stamped, they pull the next scans' new returns back
+    # onto them (a corner bringing a slanted wing into view turned the tracked heading by a
+    # degree). The continuation alone: the slanted wings 0.110 -> 0.047 m; the farthest
+    # samples spread as well slipped the thesis maze's online run on seed 2 (0.022 -> 0.054 m)
     occluded_reach_m: float | None = None
     occluded_fit_m: float = 0.3
+    # ... and it stops where the live submap's log-odds saw the point and its eight
+    # neighbours free, below this (two misses net with l_miss -0.4; None: not checked)
+    occluded_free_logodds: float | None = -0.8
     last_sample_spread: bool = False
     # a back wall through a door lies metres behind a jamb; a return between two nearer ones
     # less than this behind both is clutter that places the scan: left out with the rest,
@@ -188,6 +192,8 @@ class TrackingConfig:
             raise bad("edge_on_turn_rad", "in (0, pi/2] or None")
         if self.occluded_reach_m is not None and not self.occluded_reach_m > 0:
             raise bad("occluded_reach_m", "positive or None")
+        if self.occluded_free_logodds is not None and not self.occluded_free_logodds < 0:
+            raise bad("occluded_free_logodds", "negative (seen free) or None")
         if self.edge_on_max_step_m is not None and not self.edge_on_max_step_m > 0:
             raise bad("edge_on_max_step_m", "positive or None")
         if not self.l_miss < 0.0:
@@ -447,6 +453,94 @@ def spread_last_sample(
 
 
 @njit(cache=True)
+def _seen_free(
+    logodds: np.ndarray, ox: float, oy: float, res: float, x: float, y: float, free_lo: float
+) -> bool:
+    """Whether the log-odds grid saw ``(x, y)`` free: the cell under it and its eight
+    neighbours all below ``free_lo``. A wall's own line passes through cells that rays
+    grazing it crossed; no wall lies within a cell of a point whose neighbours were all seen
+    free (a cell outside the grid was not seen)."""
+    ix, iy = int(math.floor((x - ox) / res)), int(math.floor((y - oy) / res))
+    if iy < 1 or iy >= logodds.shape[0] - 1 or ix < 1 or ix >= logodds.shape[1] - 1:
+        return False
+    for dy in range(-1, 2):
+        for dx in range(-1, 2):
+            if not logodds[iy + dy, ix + dx] < free_lo:
+                return False
+    return True
+
+
+@njit(cache=True)
+def _fit_line(ends: np.ndarray, a: int, b: int) -> tuple[float, float, float, float, float]:
+    """Total least squares line through ``ends[a..b]`` (inclusive, either order): its centre,
+    unit direction (pointing from ``a`` towards ``b``) and the rms distance of the points."""
+    lo, hi = min(a, b), max(a, b)
+    cnt = hi - lo + 1
+    mx, my = 0.0, 0.0
+    for i in range(lo, hi + 1):
+        mx += ends[i, 0]
+        my += ends[i, 1]
+    mx, my = mx / cnt, my / cnt
+    sxx, syy, sxy = 0.0, 0.0, 0.0
+    for i in range(lo, hi + 1):
+        dx, dy = ends[i, 0] - mx, ends[i, 1] - my
+        sxx += dx * dx
+        syy += dy * dy
+        sxy += dx * dy
+    ang = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    ux, uy = math.cos(ang), math.sin(ang)
+    if (ends[b, 0] - ends[a, 0]) * ux + (ends[b, 1] - ends[a, 1]) * uy < 0.0:
+        ux, uy = -ux, -uy
+    ss = 0.0
+    for i in range(lo, hi + 1):
+        d = (ends[i, 0] - mx) * uy - (ends[i, 1] - my) * ux
+        ss += d * d
+    return mx, my, ux, uy, math.sqrt(ss / cnt)
+
+
+@njit(cache=True)
+def _meets_hider(
+    ends: np.ndarray,
+    hits: np.ndarray,
+    origin: np.ndarray,
+    end: int,
+    nb: int,
+    inner: int,
+    res: float,
+) -> bool:
+    """Whether the surface ending at ``ends[end]`` runs into the one that hides the rest of
+    it: the end lies on the line through the hiding return ``ends[nb]`` and the return past
+    it (the beam after ``nb``, away from ``end``), within the end's sample spacing (to its
+    run neighbour ``ends[inner]``) and a cell, and that line, followed on, would have met the
+    end's own beam (from ``origin``) no nearer than the end. That is a concave corner, seen
+    with the second wall edge-on: the first wall ends there, and continued it would run into
+    the second. A hiding wall that stops short of the end's beam (its own end is what hides,
+    a corner seen from outside) does not count."""
+    n = ends.shape[0]
+    nb2 = nb + (nb - end)
+    if nb2 < 0 or nb2 >= n or not hits[nb2] or inner < 0 or inner >= n:
+        return False
+    lx, ly = ends[nb2, 0] - ends[nb, 0], ends[nb2, 1] - ends[nb, 1]
+    ll = math.hypot(lx, ly)
+    if ll <= 0.0:
+        return False
+    ex, ey = ends[end, 0] - ends[nb, 0], ends[end, 1] - ends[nb, 1]
+    off = abs(ex * ly - ey * lx) / ll
+    spacing = math.hypot(ends[end, 0] - ends[inner, 0], ends[end, 1] - ends[inner, 1])
+    if off > spacing + res:
+        return False
+    # the end's beam: origin + t v; the hiding line: nb + s l
+    vx, vy = ends[end, 0] - origin[0], ends[end, 1] - origin[1]
+    r_end = math.hypot(vx, vy)
+    den = vx * ly - vy * lx
+    if abs(den) < 1e-12 or r_end <= 0.0:
+        return True  # along the beam: nothing says the hiding wall stops short
+    wx, wy = ends[nb, 0] - origin[0], ends[nb, 1] - origin[1]
+    t = (wx * ly - wy * lx) / den  # in units of the end's range
+    return t * r_end >= r_end - res
+
+
+@njit(cache=True)
 def extend_occluded(
     ends: np.ndarray,
     hits: np.ndarray,
@@ -456,14 +550,24 @@ def extend_occluded(
     reach_m: float,
     fit_m: float,
     straight_m: float,
+    logodds: np.ndarray,
+    ox: float,
+    oy: float,
+    res: float,
+    free_lo: float,
+    corner_check: bool = True,
 ) -> np.ndarray:
     """Points every ``step_m``, for ``reach_m``, continuing each surface past an end that a
     nearer return hides: a run of returns joined as :func:`densify_surface` joins them, whose
     beam neighbour past the run's end returned nearer to ``origin`` (the sensor) and farther
-    than ``max_gap_m`` from it. The direction is the run's over its last ``fit_m`` (a run
-    shorter than that, or with a return between farther than ``straight_m`` from that chord,
-    clutter, is not continued), and the continuation stops where it would pass in
-    front of the hiding return (the scanner would have seen it there).
+    than ``max_gap_m`` from it, unless the two surfaces meet there (:func:`_meets_hider`, a
+    concave corner; ``corner_check``). The direction is the line fitted (total least squares)
+    to the run's last ``fit_m``, its rms distance at most ``straight_m`` (a shorter run, or
+    clutter, is not continued). The continuation starts at the end's foot on that line and
+    stops where it would pass in front of the hiding return (the scanner would have seen it
+    there) and where the log-odds grid (``logodds``, corner ``ox, oy``, cells ``res``) saw it
+    free, below ``free_lo`` (:func:`_seen_free`): the surface does not run on across space the
+    scanner saw through before.
 
     Such an end is where the surface went out of sight, not where it ends: a wall of the next
     wing seen past a corner, a wall behind a pillar. The next scans, a little farther on, see
@@ -503,35 +607,26 @@ def extend_occluded(
             r_nb = math.hypot(ends[nb, 0] - origin[0], ends[nb, 1] - origin[1])
             if r_nb >= r_end:
                 continue  # the surface ends here: the beam past it goes on
-            # walk into the run until fit_m from its end
-            back, step = end, 1 if side == 0 else -1
-            found = False
-            while first <= back + step <= last:
+            step = 1 if side == 0 else -1  # into the run
+            if corner_check and _meets_hider(ends, hits, origin, end, nb, end + step, res):
+                continue  # a concave corner: the surface ends against the one that hides it
+            back, far = end, 0.0  # walk into the run until fit_m from its end
+            while first <= back + step <= last and far < fit_m:
                 back += step
-                d = math.hypot(ends[end, 0] - ends[back, 0], ends[end, 1] - ends[back, 1])
-                if d >= fit_m:
-                    found = True
-                    break
-            if not found:
-                continue
-            ux, uy = ends[end, 0] - ends[back, 0], ends[end, 1] - ends[back, 1]
-            d = math.hypot(ux, uy)
-            ux, uy = ux / d, uy / d
-            straight = True  # every return between lies within straight_m of the chord
-            i = back - step
-            while i != end:
-                ex, ey = ends[i, 0] - ends[back, 0], ends[i, 1] - ends[back, 1]
-                if abs(ex * uy - ey * ux) > straight_m:
-                    straight = False
-                    break
-                i -= step
-            if not straight:
-                continue
+                far = math.hypot(ends[end, 0] - ends[back, 0], ends[end, 1] - ends[back, 1])
+            if far < fit_m:
+                continue  # the run is too short
+            cx, cy, ux, uy, rms = _fit_line(ends, back, end)
+            if rms > straight_m:
+                continue  # clutter
+            t = (ends[end, 0] - cx) * ux + (ends[end, 1] - cy) * uy
+            x0, y0 = cx + t * ux, cy + t * uy  # the end's foot on the line
             for i in range(1, m + 1):
-                px = ends[end, 0] + i * step_m * ux
-                py = ends[end, 1] + i * step_m * uy
+                px, py = x0 + i * step_m * ux, y0 + i * step_m * uy
                 if math.hypot(px - origin[0], py - origin[1]) <= r_nb:
                     break  # in front of the return that hides it
+                if _seen_free(logodds, ox, oy, res, px, py, free_lo):
+                    break  # seen through before
                 out[j, 0], out[j, 1] = px, py
                 j += 1
     return out[:j]
@@ -654,7 +749,12 @@ class Submap:
                     0.5 * res,
                     cfg.occluded_reach_m,
                     cfg.occluded_fit_m,
+                    0.5 * res,
+                    self.logodds,
+                    self.ox,
+                    self.oy,
                     res,
+                    -math.inf if cfg.occluded_free_logodds is None else cfg.occluded_free_logodds,
                 )
                 pts = np.concatenate((pts, hidden))
         stamp_points(self.likelihood, self.ox, self.oy, res, pts, self.kernel)
