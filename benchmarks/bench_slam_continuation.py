@@ -4,13 +4,15 @@ farthest edge-on samples spread (``last_sample_spread``), against the true walls
 simulated recording.
 
 Run ``python benchmarks/bench_slam_continuation.py runs/NAME/run.mcap ... [--tracking
-FIELD=VALUE ...]`` (``occluded_reach_m=0.5`` by default). SLAM runs over each recording as the
-robustness suite runs it; every point a keyframe stamps by either rule is taken through that
-keyframe's tracked pose into its true pose (the recording's ground truth) and measured
-against the recording's ``/map`` (upsampled to 1.25 cm cells): its distance to the nearest
-wall face, inside a wall as well as outside. Printed per recording and rule: the keyframes
-that stamped any, the points, the share more than 0.1 and 0.2 m off every wall (a wall
-guessed where there is none, or into a solid block), and the points within 0.1 m of one.
+FIELD=VALUE ...] [--plot DIR]`` (``occluded_reach_m=0.5`` by default). SLAM runs over each
+recording as the robustness suite runs it; every point a keyframe stamps by either rule is
+taken through that keyframe's tracked pose into its true pose (the recording's ground truth)
+and measured against the recording's ``/map`` (upsampled to 1.25 cm cells): its distance to
+the nearest wall face, inside a wall as well as outside. Printed per recording and rule: the
+keyframes that stamped any, the points, the share more than 0.1 and 0.2 m off every wall (a
+wall guessed where there is none, or into a solid block), and the points within 0.1 m of
+one. ``--plot DIR`` draws each recording's continued points over its true walls
+(``DIR/NAME_continued.png``: green within 0.1 m of a wall, red farther off).
 
 It observes the rules (by wrapping the two kernels for the run) and changes nothing of what
 SLAM computes. Prints numbers; does not gate.
@@ -60,9 +62,10 @@ def config(overrides: dict[str, object]):  # noqa: ANN201
     return dataclasses.replace(base, tracking=tracking)
 
 
-def measure(path: Path, cfg) -> dict[str, tuple[int, np.ndarray]]:  # noqa: ANN001
-    """Run SLAM with ``cfg`` over the recording; per rule, the keyframes that stamped points
-    and the points' distances to the true walls (m)."""
+def measure(path: Path, cfg) -> tuple[dict[str, tuple[int, np.ndarray, np.ndarray]], object]:  # noqa: ANN001
+    """Run SLAM with ``cfg`` over the recording; per rule, the keyframes that stamped points,
+    the points in the true frame (n, 2) and their distances to the true walls (m); and the
+    recording's map."""
     from agvsim.record.mcap_reader import Recording
     from agvsim.record.ros2msg import topic_name
     from agvsim.record.scan_log import McapScanLog, interpolate_poses
@@ -113,9 +116,9 @@ def measure(path: Path, cfg) -> dict[str, tuple[int, np.ndarray]]:  # noqa: ANN0
         map_scans(log, cfg, None, len(log))
 
     h, w = dist.shape
-    out: dict[str, tuple[int, np.ndarray]] = {}
+    out: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
     for rule, rows in taken.items():
-        parts = []
+        parts, where = [], []
         for t, pose, pts in rows:
             if len(pts) == 0:
                 continue
@@ -128,8 +131,37 @@ def measure(path: Path, cfg) -> dict[str, tuple[int, np.ndarray]]:  # noqa: ANN0
             d = np.full(len(xy), np.inf)  # outside the map: off every wall
             d[ok] = dist[row[ok], col[ok]]
             parts.append(d)
-        out[rule] = (len(parts), np.concatenate(parts) if parts else np.zeros(0))
-    return out
+            where.append(xy)
+        if not parts:
+            out[rule] = (0, np.zeros((0, 2)), np.zeros(0))
+        else:
+            out[rule] = (len(parts), np.concatenate(where), np.concatenate(parts))
+    return out, grid
+
+
+def plot(png: Path, name: str, grid, xy: np.ndarray, d: np.ndarray) -> None:  # noqa: ANN001
+    """The true walls with the continued points on them: green within 0.1 m of a wall, red
+    farther off."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    occ = grid.cells[::-1] >= 50
+    h, w = occ.shape
+    x0, y0 = grid.origin_xy_m
+    extent = (x0, x0 + w * grid.resolution_m, y0, y0 + h * grid.resolution_m)
+    fig, ax = plt.subplots(figsize=(12, 12 * h / max(w, 1) + 0.6))
+    ax.imshow(occ, cmap="Greys", extent=extent, interpolation="nearest")
+    off = d > 0.1
+    ax.plot(xy[~off, 0], xy[~off, 1], ",", color="tab:green", alpha=0.4)
+    ax.plot(xy[off, 0], xy[off, 1], ".", color="tab:red", ms=1.5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{name}: continued points, {np.mean(off):.1%} more than 0.1 m off a wall (red)")
+    fig.savefig(png, dpi=100, bbox_inches="tight")
+    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -142,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="FIELD=VALUE",
         help="TrackingConfig fields for the run (default occluded_reach_m=0.5)",
     )
+    ap.add_argument("--plot", type=Path, help="write NAME_continued.png per recording here")
     args = ap.parse_args(argv)
     try:
         cfg = config(dict(tracking_override(s) for s in args.tracking))
@@ -155,7 +188,14 @@ def main(argv: list[str] | None = None) -> int:
     for path in args.mcap:
         if not path.is_file():
             ap.error(f"{path}: no such recording")
-        for rule, (frames, d) in measure(path, cfg).items():
+        result, grid = measure(path, cfg)
+        if args.plot is not None:
+            args.plot.mkdir(parents=True, exist_ok=True)
+            _, xy, d = result["continued"]
+            png = args.plot / f"{path.parent.name}_continued.png"
+            plot(png, path.parent.name, grid, xy, d)
+            print(f"{png}: the continued points on the true walls")
+        for rule, (frames, _, d) in result.items():
             n = len(d)
             off1 = float(np.mean(d > 0.1)) if n else float("nan")
             off2 = float(np.mean(d > 0.2)) if n else float("nan")

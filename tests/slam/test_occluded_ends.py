@@ -115,6 +115,28 @@ def test_a_run_round_a_corner_is_continued_along_its_last_leg() -> None:
     np.testing.assert_allclose(pts[:, 0], STEP_M / math.sqrt(2) * np.arange(1, 21), atol=1e-9)
 
 
+def test_a_surface_seen_shorter_than_twice_the_reach_is_not_continued() -> None:
+    # a door jamb's face, 0.5 m (a wall's thickness) from (0, 4.5) to (0, 5), joined at its
+    # foot to the wall y = 4.5 running off to -x, hidden at its top by a nearer return. Its
+    # last 0.3 m are straight, so without the rule it is continued 0.5 m up, past the
+    # wall's far face into the room. Seen straight over 0.5 m only, under seen_m = 1 m: not
+    # continued. The wall y = 5 seen over 1.1 m is
+    face = np.column_stack([np.zeros(6), np.linspace(4.5, 5.0, 6)])
+    wall = np.column_stack([np.linspace(-1.5, -0.1, 15), np.full(15, 4.5)])
+    ends = np.vstack([wall, face, [[0.3, 2.0]]])
+    hits = np.ones(len(ends), bool)
+    grid = np.zeros((120, 80), np.float32)
+    args = (ends, hits, np.zeros(2), 0.5, *_LENGTHS, grid, -2.0, 0.0, RES_M, -0.8, True)
+    assert len(extend_occluded(*args, 0.0)) > 0
+    assert len(extend_occluded(*args, 1.0)) == 0
+    long_wall = np.vstack([_wall(-1.1, 0.0, 5.0), [[0.1, 2.0]]])
+    args = (long_wall, np.ones(len(long_wall), bool), np.zeros(2), 0.5, *_LENGTHS, grid)
+    assert len(extend_occluded(*args, -2.0, 0.0, RES_M, -0.8, True, 1.0)) == 20
+    short_wall = np.vstack([_wall(-0.9, 0.0, 5.0), [[0.1, 2.0]]])
+    args = (short_wall, np.ones(len(short_wall), bool), np.zeros(2), 0.5, *_LENGTHS, grid)
+    assert len(extend_occluded(*args, -2.0, 0.0, RES_M, -0.8, True, 1.0)) == 0
+
+
 def test_the_continuation_stops_where_the_grid_saw_free_space() -> None:
     # the wall y = 5 ends at x = -0.01; the cells of x in [0.30, 0.45), y in [4.95, 5.10)
     # (columns 46-48, rows 99-101 of the grid whose corner is (-2, 0)) were seen free by rays
@@ -207,6 +229,9 @@ def test_tracking_config_refuses_a_reach_that_is_not_positive() -> None:
         with pytest.raises(ValueError, match="occluded_free_logodds"):
             TrackingConfig(occluded_free_logodds=bad)
     assert TrackingConfig(occluded_free_logodds=None).occluded_free_logodds is None
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ValueError, match="occluded_seen_m"):
+            TrackingConfig(occluded_seen_m=bad)
 
 
 def _beams(deg: list[float], y: float) -> np.ndarray:
