@@ -103,9 +103,10 @@ class TrackingConfig:
     # (:func:`spread_last_sample`; False: left a bump). Both ends are where a surface went
     # out of sight, not where it ends: stamped, they pull the next scans' new returns back
     # onto them (a corner bringing a slanted wing into view turned the tracked heading by a
-    # degree). The continuation alone: the slanted wings 0.110 -> 0.044 m, but ACES 7 % and
-    # the simulated hospital a quarter worse; the farthest samples spread as well slipped the
-    # thesis maze's online run on seed 2 (0.022 -> 0.054 m)
+    # degree). The continuation alone, before occluded_seen_m: the slanted wings 0.110 ->
+    # 0.044 m, but ACES 7 % and the simulated hospital a quarter worse (with it, rows checked:
+    # wings 0.049 m, ACES and the hospital within 0.3 % or better); the farthest samples
+    # spread as well slipped the thesis maze's online run on seed 2 (0.022 -> 0.054 m)
     occluded_reach_m: float | None = None
     occluded_fit_m: float = 0.3
     # ... and it stops where the live submap's log-odds saw the point and its eight
