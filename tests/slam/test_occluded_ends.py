@@ -357,9 +357,9 @@ def test_a_wing_coming_into_view_past_a_corner_no_longer_turns_the_match(angle_d
     # behind the corner, +0.005 and +0.004 deg, and the same with the farthest samples
     # spread as well
     walls = _junction(angle_deg)
-    before = TrackingConfig(fuse_odometry=False, prior_lin_weight=0.0, prior_ang_weight=0.0)
-    assert before.occluded_reach_m is None and not before.last_sample_spread  # the defaults
-    alone = dataclasses.replace(before, occluded_reach_m=0.5)
+    alone = TrackingConfig(fuse_odometry=False, prior_lin_weight=0.0, prior_ang_weight=0.0)
+    assert alone.occluded_reach_m == 0.5 and not alone.last_sample_spread  # the defaults
+    before = dataclasses.replace(alone, occluded_reach_m=None)
     both = dataclasses.replace(alone, last_sample_spread=True)
     assert _approach_heading_error_deg(before, walls) < -0.03
     assert abs(_approach_heading_error_deg(alone, walls)) < 0.015
