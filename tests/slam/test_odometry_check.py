@@ -273,3 +273,33 @@ def test_a_lost_scan_that_fits_nowhere_keeps_the_prediction() -> None:
         if not keeps:  # the least bad pose lies outside the narrow window (0.15 m, 6 deg)
             off = between(guess, pose)
             assert abs(off[2]) > cfg.window_rad or np.abs(off[:2]).max() > cfg.window_m
+
+
+def test_ties_go_to_the_prediction_a_stall_makes_likely() -> None:
+    """While odometry stands still on the move the last motion wins ties (index 1); once it
+    moves again after nothing but stalls, the reference prediction does; after a scan where
+    odometry moved wrongly (a slip) no prediction is preferred."""
+    chk = OdometryCheck(DoubtConfig())
+    chk.accept(np.zeros(3), np.zeros(3), doubted=False)
+    odom = np.array([0.1, 0.0, 0.0])
+    chk.accept(odom.copy(), odom.copy(), doubted=False)  # the reference, moving 0.1 m a scan
+    pose = odom.copy()
+    for _ in range(3):  # odometry frozen at 0.1 m
+        cands = chk.candidates(pose, odom, odom)
+        assert chk.stall and chk.preferred == 1
+        pose = cands[1]
+        chk.accept(pose, odom, doubted=True)
+    assert chk.stalls_only and chk.since_ref == 4
+    jumped = np.array([0.5, 0.0, 0.0])  # the jump by the 0.4 m it missed
+    cands = chk.candidates(pose, odom, jumped)
+    assert not chk.frozen and chk.preferred == len(cands) - 1 == 1
+    np.testing.assert_allclose(cands[1], [0.5, 0.0, 0.0], atol=1e-12)  # from the reference
+    np.testing.assert_allclose(cands[0], [0.8, 0.0, 0.0], atol=1e-12)  # the jump added again
+    # a slip: odometry moved, the match refuted it; the reference is no longer preferred
+    slip = OdometryCheck(DoubtConfig())
+    slip.accept(np.zeros(3), np.zeros(3), doubted=False)
+    slip.candidates(np.zeros(3), np.zeros(3), odom)
+    slip.accept(np.zeros(3), odom, doubted=True)
+    assert not slip.stalls_only
+    slip.candidates(np.zeros(3), odom, 2 * odom)
+    assert slip.since_ref == 2 and slip.preferred is None

@@ -967,6 +967,11 @@ class Tracker:
         if len(guesses) > 1:
             fits = [sm.score_pose(s.likelihood, s.ox, s.oy, res, points, g) for g in guesses]
             best = int(np.argmax(fits))
+            # ties go to the prediction a stall makes likely (the last motion while odometry
+            # stands still, the reference once it jumps): along a corridor both fit alike
+            pref = self.check.preferred
+            if pref is not None and fits[best] - fits[pref] < cfg.doubt.margin:
+                best = pref
             guess = guesses[best]
             # the scan-to-scan increment was wrong (a stall, or the jump after one)
             self.odom_suspect = best != 0

@@ -221,9 +221,13 @@ class GraphSlam:
         self._loops_optimised = 0  # closures in the graph at the last optimisation
         self.switches = np.zeros(0)  # switch of every loop closure at the last optimisation
         self._last_optimised_node = 0
-        self._scan_at_keyframe = 0
+        # the last keyframe whose odometry reading was live (not taken while odometry stalled)
+        # and the count of scans at it: odometry edges run from there
+        self._odom_anchor: tuple[int, int] | None = None
         self._odom = np.zeros(3)  # odometry pose of the scan being processed
-        self._odom_doubted = False  # a scan since the last keyframe refuted odometry
+        # a scan since the anchor whose match refuted odometry (a stall does not count: a
+        # frozen odometry is right again from before the stall once it moves)
+        self._odom_doubted = False
         # the last scan that fitted (score at least tracking.retry_score): local pose and
         # odometry, and the scans since (a global relocalisation is checked against them)
         self._fit: tuple[F64, F64] | None = None
@@ -291,7 +295,7 @@ class GraphSlam:
             self._since_fit += 1
             self._froze |= self._odometry_still()
         self.tracker.accept(pose, odom_pose)
-        self._odom_doubted |= self.tracker.odom_suspect
+        self._odom_doubted |= self.tracker.doubted and not self.tracker.check.stall
         if not hold and self.motion.is_keyframe(pose, timestamp):
             node = self.add_keyframe(pose, points, ends, hits)
             closures = self.find_loop_closures(node)
@@ -376,21 +380,36 @@ class GraphSlam:
             cfg.sigma_local_rad,
             cfg.local_weak_floor,
         )
+        # this keyframe's odometry stands still while the robot moves (a stalled encoder): no
+        # odometry edge to or from it; the next live keyframe is tied to the last live one
+        stale = self.tracker.check.stall
         if node > 0 and self._relocated is None:  # no chain edge across a relocalisation
             prev = self.keyframes[node - 1]
             self.graph.add_edge(self.node_var[node - 1], var, between(prev.local, pose), info_local)
             noise = self.tracker.odometry_variance()
-            # no odometry edge across a stretch where scan matching refuted odometry (a
-            # freeze, a jump, a slip): it would pull against the local-SLAM edge
-            if cfg.odometry_edges and noise is not None and not self._odom_doubted:
+            anchor = self._odom_anchor
+            # no odometry edge across a stretch where scan matching refuted odometry (a jump
+            # it was not right after, a slip): it would pull against the local-SLAM edges
+            if (
+                cfg.odometry_edges
+                and noise is not None
+                and anchor is not None
+                and not self._odom_doubted
+                and not stale
+            ):
                 # odometry's error is a random walk: the variance grows with the scans between
-                n = max(len(self.scan_times) - self._scan_at_keyframe, 1)
+                a_node, a_scans = anchor
+                n = max(len(self.scan_times) - a_scans, 1)
                 v_t = n * max(noise[0], cfg.odometry_floor_m**2)
                 v_r = n * max(noise[1], cfg.odometry_floor_rad**2)
                 info = np.diag([1.0 / v_t, 1.0 / v_t, 1.0 / v_r])
-                self.graph.add_edge(self.node_var[node - 1], var, between(prev.odom, kf.odom), info)
-        self._scan_at_keyframe = len(self.scan_times)
-        self._odom_doubted = False
+                z = between(self.keyframes[a_node].odom, kf.odom)
+                self.graph.add_edge(self.node_var[a_node], var, z, info)
+        elif self._relocated is not None:
+            self._odom_anchor = None  # odometry did not see the robot carried off
+        if not stale:
+            self._odom_anchor = (node, len(self.scan_times))
+            self._odom_doubted = False
         n_before = len(self.tracker.submaps)
         sensor_xy = compose(pose, self.laser_offset)[:2]
         self.tracker.insert(node, pose, sensor_xy, compose(pose, _xy0(ends))[:, :2], hits)

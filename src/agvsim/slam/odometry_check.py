@@ -81,20 +81,30 @@ class OdometryCheck:
         self.last_pose: F64 | None = None
         self.last_motion: F64 | None = None  # tracked motion of the last scan
         self._moving = False
+        # every scan since the reference was a stall (none where odometry moved wrongly)
+        self.stalls_only = True
+        # index into candidates() of the prediction that wins ties (None: the first)
+        self.preferred: int | None = None
 
     def candidates(self, prev_pose: F64, prev_odom: F64, odom: F64) -> list[F64]:
         """Predictions of the scan's pose: scan to scan; the last tracked motion again if
         odometry stalled (:meth:`stalled`); and from the reference if that is an older scan."""
         u = between(prev_odom, odom)
         out = [compose(prev_pose, u)]
+        self.preferred = None
         if not self.cfg.enabled:
             return out
         self.frozen = bool(np.all(u == 0.0))
         self.stall = self.frozen and self._moving
         if self.stall and self.last_motion is not None:
             out.append(compose(prev_pose, self.last_motion))
+            self.preferred = 1  # a stalled encoder, not a robot stopped dead
         if self.ref_pose is not None and self.ref_odom is not None and self.since_ref > 1:
             out.append(compose(self.ref_pose, between(self.ref_odom, odom)))
+            if self.stalls_only and not self.frozen:
+                # odometry moves again after a stall: it jumped by what it missed, and is
+                # right from the reference
+                self.preferred = len(out) - 1
         return out
 
     def spread(self, odom_var: tuple[float, float] | None) -> tuple[float, float] | None:
@@ -166,11 +176,13 @@ class OdometryCheck:
             # max_doubt_scans (a slip for good)
             self.doubted += 0 if self.frozen else 1
             self.n_doubted += 1
+            self.stalls_only = self.stalls_only and self.stall
         else:
             self.doubted = 0
         if self.ref_pose is None or not doubted or self.doubted >= self.cfg.max_doubt_scans:
             self.ref_pose, self.ref_odom = pose.copy(), np.asarray(odom, np.float64).copy()
             self.since_ref = 1
+            self.stalls_only = True
             if doubted:
                 self.doubted = 0
         else:
