@@ -891,7 +891,6 @@ class Tracker:
         )
         self.check = OdometryCheck(cfg.doubt)
         self.doubted = False  # the last scan's match refuted odometry
-        self.odom_suspect = False  # ... or its scan-to-scan odometry increment was wrong
         self.n_relocalised = 0
         self.lost = False  # tracking lost and not found again near the prediction
         self.poor = 0  # scans in a row that fit under retry_score
@@ -941,8 +940,10 @@ class Tracker:
 
     def match(self, points: F64, guesses: list[F64], ang_step: float) -> tuple[F64, float]:
         """Correlative search then Gauss-Newton against the older active submap, around the
-        prediction the scan fits best, in windows that grow with odometry's uncertainty (with
-        no motion prior when odometry is fused: ties go to the candidate nearest it). A poor
+        prediction the scan fits best (ties, within ``doubt.margin``, to the one a stall makes
+        likely: :attr:`~.odometry_check.OdometryCheck.preferred`), in windows that grow with
+        odometry's uncertainty (with no motion prior when odometry is fused: ties go to the
+        candidate nearest it). A poor
         match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
         wide window around every prediction (where the scan fits poorly everywhere, the one it
         fits best at its centre need not be the one whose window holds the pose; another's
@@ -957,7 +958,7 @@ class Tracker:
         prediction instead and not learnt from (``held``). ``ang_step`` (rad) is the angular
         search step."""
         guess = guesses[0]
-        self.doubted = self.odom_suspect = self.unmatched = self.held = False
+        self.doubted = self.unmatched = self.held = False
         self.unobserved = 0
         self.hessian = None
         if not self.active:
@@ -973,8 +974,6 @@ class Tracker:
             if pref is not None and fits[best] - fits[pref] < cfg.doubt.margin:
                 best = pref
             guess = guesses[best]
-            # the scan-to-scan increment was wrong (a stall, or the jump after one)
-            self.odom_suspect = best != 0
         points = self._observed(s, points, guess)
         odom_var = self.odometry_variance()
         turn_var = 0.0
@@ -1067,7 +1066,6 @@ class Tracker:
         at_guess = sm.score_pose(s.likelihood, s.ox, s.oy, res, points, guess)
         match_var = None if self.fusion is None else self.fusion.match_variance()
         self.doubted = self.check.disagrees(guess, pose, score, at_guess, odom_var, match_var)
-        self.odom_suspect |= self.doubted
         self.hessian = sm.match_hessian(s.likelihood, s.ox, s.oy, res, points, pose)
         if self.fusion is not None and not self.doubted:
             step = between(self.pose, guess) if self.pose is not None else None

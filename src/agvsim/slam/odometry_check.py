@@ -8,7 +8,10 @@ outside every search window. So :class:`OdometryCheck` keeps a *reference*: the 
 match agreed with odometry, ``(x_ref, o_ref)``. Odometry is relative, so the prediction from the
 reference, ``x_ref * (o_ref^-1 o_now)``, is right after a freeze ends however long it lasted;
 the scan-to-scan prediction is right after a slip (odometry moved, the robot did not). Both are
-offered to the matcher, which keeps the one the scan fits better (:meth:`candidates`).
+offered to the matcher, which keeps the one the scan fits better (:meth:`candidates`); where
+they fit alike (along a corridor) a stall decides (:attr:`OdometryCheck.preferred`): while
+odometry stands still on the move the last tracked motion, once it moves again after nothing
+but stalls the prediction from the reference.
 
 Odometry *stalled* when it reports exactly no motion while tracking saw the robot move at
 the scan before (``moving_m``, ``moving_rad``): wheels decelerate, encoders do not stop dead.
@@ -88,7 +91,8 @@ class OdometryCheck:
 
     def candidates(self, prev_pose: F64, prev_odom: F64, odom: F64) -> list[F64]:
         """Predictions of the scan's pose: scan to scan; the last tracked motion again if
-        odometry stalled (:meth:`stalled`); and from the reference if that is an older scan."""
+        odometry stalled (``stall``); and from the reference if that is an older scan. Sets
+        ``preferred``, the one that wins ties (module docstring)."""
         u = between(prev_odom, odom)
         out = [compose(prev_pose, u)]
         self.preferred = None
