@@ -60,6 +60,32 @@ def test_stall_while_moving_offers_the_last_motion() -> None:
     assert len(still.candidates(np.zeros(3), np.zeros(3), np.zeros(3))) == 1 and not still.stall
 
 
+def test_a_stall_needs_odometry_moving_before_and_lasts_while_tracking_moves() -> None:
+    """A robot at rest whose tracked pose jitters by more than ``moving_m`` is not stalled (its
+    odometry did not move at the scan before); a stall that began on the move lasts while
+    odometry stays frozen and tracking still moves, and ends where tracking stops too."""
+    jitter = OdometryCheck(DoubtConfig())
+    jitter.accept(np.zeros(3), np.zeros(3), doubted=False)
+    jitter.accept(np.array([0.012, 0.0, 0.0]), np.zeros(3), doubted=False)  # 1.2 cm > moving_m
+    assert len(jitter.candidates(np.array([0.012, 0.0, 0.0]), np.zeros(3), np.zeros(3))) == 1
+    assert jitter.frozen and not jitter.stall
+    chk = OdometryCheck(DoubtConfig())
+    chk.accept(np.zeros(3), np.zeros(3), doubted=False)
+    odom = np.array([0.05, 0.0, 0.0])
+    chk.accept(odom.copy(), odom.copy(), doubted=False)  # both moved 5 cm
+    pose = odom.copy()
+    for _ in range(3):  # odometry frozen, the robot still driving 5 cm a scan
+        chk.candidates(pose, odom, odom)
+        assert chk.stall
+        pose = pose + np.array([0.05, 0.0, 0.0])
+        chk.accept(pose, odom, doubted=True)
+    chk.candidates(pose, odom, odom)
+    assert chk.stall
+    chk.accept(pose.copy(), odom, doubted=True)  # tracking saw it stop
+    chk.candidates(pose, odom, odom)
+    assert chk.frozen and not chk.stall
+
+
 def test_gate_uses_learnt_spread_floors_and_the_fit_margin() -> None:
     """Gate = max(floor, 4 sqrt(n s_o^2 + s_m^2)). With s_o^2 = 0.01 m^2 per scan, n = 4 and
     s_m^2 = 0: 4 * sqrt(0.04) = 0.8 m; with tiny noises the 0.1 m / 3 deg floors apply."""

@@ -891,6 +891,8 @@ class Tracker:
         )
         self.check = OdometryCheck(cfg.doubt)
         self.doubted = False  # the last scan's match refuted odometry
+        # ... or the scan fitted a prediction other than scan to scan, unlike a stall
+        self.odom_suspect = False
         self.n_relocalised = 0
         self.lost = False  # tracking lost and not found again near the prediction
         self.poor = 0  # scans in a row that fit under retry_score
@@ -958,7 +960,7 @@ class Tracker:
         prediction instead and not learnt from (``held``). ``ang_step`` (rad) is the angular
         search step."""
         guess = guesses[0]
-        self.doubted = self.unmatched = self.held = False
+        self.doubted = self.odom_suspect = self.unmatched = self.held = False
         self.unobserved = 0
         self.hessian = None
         if not self.active:
@@ -974,6 +976,9 @@ class Tracker:
             if pref is not None and fits[best] - fits[pref] < cfg.doubt.margin:
                 best = pref
             guess = guesses[best]
+            # the scan-to-scan odometry increment was wrong, and not as a stall would have it
+            # (the frozen scans, the jump after them: odometry edges run across those)
+            self.odom_suspect = best != 0 and best != pref
         points = self._observed(s, points, guess)
         odom_var = self.odometry_variance()
         turn_var = 0.0

@@ -225,7 +225,8 @@ class GraphSlam:
         # and the count of scans at it: odometry edges run from there
         self._odom_anchor: tuple[int, int] | None = None
         self._odom = np.zeros(3)  # odometry pose of the scan being processed
-        # a scan since the anchor whose match refuted odometry (a stall does not count: a
+        # a scan since the anchor whose match refuted odometry, or that fitted another
+        # prediction than scan to scan where no stall explains it (a stall does not count: a
         # frozen odometry is right again from before the stall once it moves)
         self._odom_doubted = False
         # the last scan that fitted (score at least tracking.retry_score): local pose and
@@ -295,7 +296,9 @@ class GraphSlam:
             self._since_fit += 1
             self._froze |= self._odometry_still()
         self.tracker.accept(pose, odom_pose)
-        self._odom_doubted |= self.tracker.doubted and not self.tracker.check.stall
+        self._odom_doubted |= self.tracker.odom_suspect or (
+            self.tracker.doubted and not self.tracker.check.stall
+        )
         if not hold and self.motion.is_keyframe(pose, timestamp):
             node = self.add_keyframe(pose, points, ends, hits)
             closures = self.find_loop_closures(node)

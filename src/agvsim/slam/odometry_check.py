@@ -13,8 +13,12 @@ they fit alike (along a corridor) a stall decides (:attr:`OdometryCheck.preferre
 odometry stands still on the move the last tracked motion, once it moves again after nothing
 but stalls the prediction from the reference.
 
-Odometry *stalled* when it reports exactly no motion while tracking saw the robot move at
-the scan before (``moving_m``, ``moving_rad``): wheels decelerate, encoders do not stop dead.
+Odometry *stalled* when it reports exactly no motion while both it and tracking saw the robot
+move at the scan before (``moving_m``, ``moving_rad``): wheels decelerate, encoders do not stop
+dead. The stall lasts while odometry stays frozen and tracking still sees the robot move. A
+robot at rest whose tracked pose jitters by a centimetre or half a degree is not stalled: its
+odometry did not move (ACES stands still for a third of its scans, and tracking alone called
+210 of them stalls).
 Then the last tracked motion is offered as a third prediction, and the scan counts as one that
 refuted odometry. Otherwise a match *disagrees* with the prediction (:meth:`disagrees`) when
 it lies further from it than ``gate_sigmas`` of their combined spread (odometry's learnt
@@ -82,8 +86,10 @@ class OdometryCheck:
         self.stall = False  # odometry did not change while the robot was moving
         self.frozen = False  # odometry did not change at all since the scan before
         self.last_pose: F64 | None = None
+        self.last_odom: F64 | None = None
         self.last_motion: F64 | None = None  # tracked motion of the last scan
         self._moving = False
+        self._odom_moving = False  # odometry's own increment at the scan before moved
         # every scan since the reference was a stall (none where odometry moved wrongly)
         self.stalls_only = True
         # index into candidates() of the prediction that wins ties (None: the first)
@@ -99,7 +105,7 @@ class OdometryCheck:
         if not self.cfg.enabled:
             return out
         self.frozen = bool(np.all(u == 0.0))
-        self.stall = self.frozen and self._moving
+        self.stall = self.frozen and self._moving and (self.stall or self._odom_moving)
         if self.stall and self.last_motion is not None:
             out.append(compose(prev_pose, self.last_motion))
             self.preferred = 1  # a stalled encoder, not a robot stopped dead
@@ -163,17 +169,19 @@ class OdometryCheck:
         gate_rad = max(self.cfg.min_gate_rad, k * math.sqrt(s[1] ** 2 + mv[1]))
         return math.hypot(d[0], d[1]) > gate_m or abs(d[2]) > gate_rad
 
+    def _moved(self, step: F64) -> bool:
+        c = self.cfg
+        return math.hypot(step[0], step[1]) >= c.moving_m or abs(step[2]) >= c.moving_rad
+
     def accept(self, pose: F64, odom: F64, doubted: bool) -> None:
         """Record the scan's pose: it becomes the reference unless odometry was doubted (for
         fewer than ``max_doubt_scans`` in a row)."""
-        if self.last_pose is not None:
+        odom = np.asarray(odom, np.float64)
+        if self.last_pose is not None and self.last_odom is not None:
             self.last_motion = between(self.last_pose, pose)
-            c = self.cfg
-            self._moving = (
-                math.hypot(self.last_motion[0], self.last_motion[1]) >= c.moving_m
-                or abs(self.last_motion[2]) >= c.moving_rad
-            )
-        self.last_pose = pose.copy()
+            self._moving = self._moved(self.last_motion)
+            self._odom_moving = self._moved(between(self.last_odom, odom))
+        self.last_pose, self.last_odom = pose.copy(), odom.copy()
         if doubted:
             # a frozen odometry is right again once it moves (it jumps by what it missed,
             # however long it froze): only scans where it moved wrongly count towards
@@ -184,7 +192,7 @@ class OdometryCheck:
         else:
             self.doubted = 0
         if self.ref_pose is None or not doubted or self.doubted >= self.cfg.max_doubt_scans:
-            self.ref_pose, self.ref_odom = pose.copy(), np.asarray(odom, np.float64).copy()
+            self.ref_pose, self.ref_odom = pose.copy(), odom.copy()
             self.since_ref = 1
             self.stalls_only = True
             if doubted:
