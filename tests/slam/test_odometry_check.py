@@ -60,15 +60,18 @@ def test_stall_while_moving_offers_the_last_motion() -> None:
     assert len(still.candidates(np.zeros(3), np.zeros(3), np.zeros(3))) == 1 and not still.stall
 
 
-def test_a_stall_needs_odometry_moving_before_and_lasts_while_tracking_moves() -> None:
-    """A robot at rest whose tracked pose jitters by more than ``moving_m`` is not stalled (its
-    odometry did not move at the scan before); a stall that began on the move lasts while
-    odometry stays frozen and tracking still moves, and ends where tracking stops too."""
+def test_an_encoder_stall_needs_odometry_moving_before_and_lasts_while_tracking_moves() -> None:
+    """A robot at rest whose tracked pose jitters by more than ``moving_m`` under a frozen
+    odometry gets the last motion offered (a stall) but decides no tie (no encoder stall: its
+    odometry did not move at the scan before); one that stalls on the move does, while
+    odometry stays frozen and tracking still moves, and no longer where tracking stops too."""
     jitter = OdometryCheck(DoubtConfig())
     jitter.accept(np.zeros(3), np.zeros(3), doubted=False)
     jitter.accept(np.array([0.012, 0.0, 0.0]), np.zeros(3), doubted=False)  # 1.2 cm > moving_m
-    assert len(jitter.candidates(np.array([0.012, 0.0, 0.0]), np.zeros(3), np.zeros(3))) == 1
-    assert jitter.frozen and not jitter.stall
+    assert len(jitter.candidates(np.array([0.012, 0.0, 0.0]), np.zeros(3), np.zeros(3))) == 2
+    assert jitter.stall and not jitter.encoder_stall and jitter.preferred is None
+    jitter.accept(np.array([0.024, 0.0, 0.0]), np.zeros(3), doubted=True)
+    assert not jitter.stalls_only  # the reference is not preferred when odometry moves again
     chk = OdometryCheck(DoubtConfig())
     chk.accept(np.zeros(3), np.zeros(3), doubted=False)
     odom = np.array([0.05, 0.0, 0.0])
@@ -76,14 +79,14 @@ def test_a_stall_needs_odometry_moving_before_and_lasts_while_tracking_moves() -
     pose = odom.copy()
     for _ in range(3):  # odometry frozen, the robot still driving 5 cm a scan
         chk.candidates(pose, odom, odom)
-        assert chk.stall
+        assert chk.encoder_stall and chk.preferred == 1
         pose = pose + np.array([0.05, 0.0, 0.0])
         chk.accept(pose, odom, doubted=True)
     chk.candidates(pose, odom, odom)
-    assert chk.stall
+    assert chk.encoder_stall
     chk.accept(pose.copy(), odom, doubted=True)  # tracking saw it stop
     chk.candidates(pose, odom, odom)
-    assert chk.frozen and not chk.stall
+    assert chk.frozen and not chk.stall and not chk.encoder_stall and chk.preferred is None
 
 
 def test_gate_uses_learnt_spread_floors_and_the_fit_margin() -> None:

@@ -297,7 +297,7 @@ class GraphSlam:
             self._froze |= self._odometry_still()
         self.tracker.accept(pose, odom_pose)
         self._odom_doubted |= self.tracker.odom_suspect or (
-            self.tracker.doubted and not self.tracker.check.stall
+            self.tracker.doubted and not self.tracker.check.encoder_stall
         )
         if not hold and self.motion.is_keyframe(pose, timestamp):
             node = self.add_keyframe(pose, points, ends, hits)
@@ -385,7 +385,7 @@ class GraphSlam:
         )
         # this keyframe's odometry stands still while the robot moves (a stalled encoder): no
         # odometry edge to or from it; the next live keyframe is tied to the last live one
-        stale = self.tracker.check.stall
+        stale = self.tracker.check.encoder_stall
         if node > 0 and self._relocated is None:  # no chain edge across a relocalisation
             prev = self.keyframes[node - 1]
             self.graph.add_edge(self.node_var[node - 1], var, between(prev.local, pose), info_local)

@@ -9,25 +9,28 @@ match agreed with odometry, ``(x_ref, o_ref)``. Odometry is relative, so the pre
 reference, ``x_ref * (o_ref^-1 o_now)``, is right after a freeze ends however long it lasted;
 the scan-to-scan prediction is right after a slip (odometry moved, the robot did not). Both are
 offered to the matcher, which keeps the one the scan fits better (:meth:`candidates`); where
-they fit alike (along a corridor) a stall decides (:attr:`OdometryCheck.preferred`): while
-odometry stands still on the move the last tracked motion, once it moves again after nothing
-but stalls the prediction from the reference.
+they fit alike (along a corridor) an encoder stall decides (:attr:`OdometryCheck.preferred`,
+below): while odometry stands still on the move the last tracked motion, once it moves again
+after nothing but encoder stalls the prediction from the reference.
 
-Odometry *stalled* when it reports exactly no motion while both it and tracking saw the robot
-move at the scan before (``moving_m``, ``moving_rad``): wheels decelerate, encoders do not stop
-dead. The stall lasts while odometry stays frozen and tracking still sees the robot move. A
-robot at rest whose tracked pose jitters by a centimetre or half a degree is not stalled: its
-odometry did not move (ACES stands still for a third of its scans, and tracking alone called
-210 of them stalls).
-Then the last tracked motion is offered as a third prediction, and the scan counts as one that
-refuted odometry. Otherwise a match *disagrees* with the prediction (:meth:`disagrees`) when
-it lies further from it than ``gate_sigmas`` of their combined spread (odometry's learnt
-per-scan variance times the scans since the reference, plus the match's), with floors of two
-cells and three degrees, **and** the scan fits clearly better at the match than at the
-prediction (``margin`` in mean likelihood): along a featureless corridor the two fit equally
-and odometry keeps the pose. While odometry disagrees, the reference stays where odometry was
-last right; after ``max_doubt_scans`` in a row the reference moves on regardless (odometry
-slipped for good and is right again from here).
+Odometry *stalled* when it reports exactly no motion while tracking saw the robot move at
+the scan before (``moving_m``, ``moving_rad``). Then the last tracked motion is offered as a
+third prediction, and the scan counts as one that refuted odometry. Only an *encoder stall*
+(``encoder_stall``) decides ties and keeps odometry edges across it: one where odometry
+itself moved at the scan before as well (wheels decelerate, encoders do not stop dead), and
+the scans after it while odometry stays frozen and tracking still moves. Tracking's jitter
+of a centimetre or half a degree on a robot at rest is no such stall (ACES stands still for
+a third of its scans, and tracking alone called 210 of them stalls), while a robot that
+starts a turn from rest under a frozen odometry still gets the last motion offered.
+
+Otherwise a match *disagrees* with the prediction (:meth:`disagrees`) when it lies further from
+it than ``gate_sigmas`` of their combined spread (odometry's learnt per-scan variance times the
+scans since the reference, plus the match's), with floors of two cells and three degrees,
+**and** the scan fits clearly better at the match than at the prediction (``margin`` in mean
+likelihood): along a featureless corridor the two fit equally and odometry keeps the pose.
+While odometry disagrees, the reference stays where odometry was last right; after
+``max_doubt_scans`` in a row the reference moves on regardless (odometry slipped for good and
+is right again from here).
 
 The heading and translation search windows grow with that same spread (:meth:`windows`):
 ``window_sigmas`` standard deviations of the prediction, between the configured narrow window
@@ -84,6 +87,8 @@ class OdometryCheck:
         self.doubted = 0  # scans in a row whose match disagreed with odometry
         self.n_doubted = 0  # in all
         self.stall = False  # odometry did not change while the robot was moving
+        # ... and it moved itself at the scan before, or that scan was one: see the docstring
+        self.encoder_stall = False
         self.frozen = False  # odometry did not change at all since the scan before
         self.last_pose: F64 | None = None
         self.last_odom: F64 | None = None
@@ -105,10 +110,12 @@ class OdometryCheck:
         if not self.cfg.enabled:
             return out
         self.frozen = bool(np.all(u == 0.0))
-        self.stall = self.frozen and self._moving and (self.stall or self._odom_moving)
+        self.stall = self.frozen and self._moving
+        self.encoder_stall = self.stall and (self.encoder_stall or self._odom_moving)
         if self.stall and self.last_motion is not None:
             out.append(compose(prev_pose, self.last_motion))
-            self.preferred = 1  # a stalled encoder, not a robot stopped dead
+            if self.encoder_stall:
+                self.preferred = 1  # a stalled encoder, not a robot stopped dead
         if self.ref_pose is not None and self.ref_odom is not None and self.since_ref > 1:
             out.append(compose(self.ref_pose, between(self.ref_odom, odom)))
             if self.stalls_only and not self.frozen:
@@ -188,7 +195,7 @@ class OdometryCheck:
             # max_doubt_scans (a slip for good)
             self.doubted += 0 if self.frozen else 1
             self.n_doubted += 1
-            self.stalls_only = self.stalls_only and self.stall
+            self.stalls_only = self.stalls_only and self.encoder_stall
         else:
             self.doubted = 0
         if self.ref_pose is None or not doubted or self.doubted >= self.cfg.max_doubt_scans:
