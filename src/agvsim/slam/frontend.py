@@ -942,21 +942,20 @@ class Tracker:
 
     def match(self, points: F64, guesses: list[F64], ang_step: float) -> tuple[F64, float]:
         """Correlative search then Gauss-Newton against the older active submap, around the
-        prediction the scan fits best (ties, within ``doubt.margin``, to the one a stall makes
-        likely: :attr:`~.odometry_check.OdometryCheck.preferred`), in windows that grow with
-        odometry's uncertainty (with no motion prior when odometry is fused: ties go to the
-        candidate nearest it). A poor
-        match (score under ``retry_score``: odometry glitch, fast turn) is searched again in the
-        wide window around every prediction (where the scan fits poorly everywhere, the one it
-        fits best at its centre need not be the one whose window holds the pose; another's
-        result must beat that one's by ``doubt.margin``); one still under ``lost_score`` for
-        ``relocalise_scans`` scans is relocalised in the submap; one that tracking lost and that
-        still fits under ``lost_score``, outside the narrow window, keeps the prediction
-        (``unmatched_hold_scans``). The heading window also grows with the turn the prediction
-        makes, by odometry's learnt error per radian turned
-        (:meth:`~.fusion.OdometryFusion.estimate_turn_ratio`). A match that refutes odometry
-        is kept as it is; otherwise it is fused with the prediction. A narrow match held back
-        on the window's edge by the last keyframe's samples (:meth:`_held`) is refined from the
+        prediction the scan fits best (ties, within ``doubt.margin``, to the one an encoder
+        stall makes likely: :attr:`~.odometry_check.OdometryCheck.preferred`), in windows that
+        grow with odometry's uncertainty (with no motion prior when odometry is fused: ties go
+        to the candidate nearest it). A poor match (score under ``retry_score``: odometry
+        glitch, fast turn) is searched again in the wide window around every prediction (where
+        the scan fits poorly everywhere, the one it fits best at its centre need not be the one
+        whose window holds the pose; another's result must beat that one's by ``doubt.margin``);
+        one still under ``lost_score`` for ``relocalise_scans`` scans is relocalised in the
+        submap; one that tracking lost and that still fits under ``lost_score``, outside the
+        narrow window, keeps the prediction (``unmatched_hold_scans``). The heading window also
+        grows with the turn the prediction makes, by odometry's learnt error per radian turned
+        (:meth:`~.fusion.OdometryFusion.estimate_turn_ratio`). A match that refutes odometry is
+        kept as it is; otherwise it is fused with the prediction. A narrow match held back on
+        the window's edge by the last keyframe's samples (:meth:`_held`) is refined from the
         prediction instead and not learnt from (``held``). ``ang_step`` (rad) is the angular
         search step."""
         guess = guesses[0]
@@ -970,8 +969,8 @@ class Tracker:
         if len(guesses) > 1:
             fits = [sm.score_pose(s.likelihood, s.ox, s.oy, res, points, g) for g in guesses]
             best = int(np.argmax(fits))
-            # ties go to the prediction a stall makes likely (the last motion while odometry
-            # stands still, the reference once it jumps): along a corridor both fit alike
+            # ties go to the prediction an encoder stall makes likely (the last motion while
+            # odometry stands still, the reference once it jumps): along a corridor both fit alike
             pref = self.check.preferred
             if pref is not None and fits[best] - fits[pref] < cfg.doubt.margin:
                 best = pref
