@@ -5,8 +5,10 @@ Import them as ``from helpers import ...``: pytest puts this folder on ``sys.pat
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
+import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -18,6 +20,12 @@ import pytest
 from agvsim.world.grid import OccupancyGrid
 
 CHROMIUM = "/usr/bin/chromium"
+
+# Waits on the page (Playwright's milliseconds). Headless Chromium renders WebGL in software:
+# on a busy 2-core machine a page takes up to tens of seconds to load and seconds to answer
+# a click, so the waits are long. They cost nothing when the page answers sooner.
+PAGE_LOAD_MS = 120_000  # the page's panel showing after goto()
+ANSWER_MS = 60_000  # a message or field appearing after a click
 
 
 def walled_room(rows: int, cols: int) -> OccupancyGrid:
@@ -115,13 +123,29 @@ def click_scene_centre(page) -> None:
 
 
 @contextmanager
+def one_browser_at_a_time() -> Iterator[None]:
+    """Hold this machine's browser-test lock (a ``flock`` on a file in the temp folder) while
+    the block runs: one headless Chromium at a time across pytest-xdist's workers (and
+    concurrent runs). A software-rendered page takes about a core while it loads and about
+    half a core idle; two at once on 2 cores starved each other past any wait."""
+    path = Path(tempfile.gettempdir()) / "agvsim-browser-tests.lock"
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)  # released when the file closes, or the process dies
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@contextmanager
 def chromium() -> Iterator:
-    """Debian's headless chromium driven by Playwright (never a downloaded browser)."""
+    """Debian's headless chromium driven by Playwright (never a downloaded browser), the only
+    one running on this machine's tests while it is open (:func:`one_browser_at_a_time`)."""
     from playwright.sync_api import sync_playwright
 
     from agvsim.bench_app import FLAGS
 
-    with sync_playwright() as p:
+    with one_browser_at_a_time(), sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
         try:
             yield browser

@@ -11,7 +11,15 @@ import io
 import numpy as np
 import pytest
 
-from helpers import chromium, click_scene_centre, room_yaml, served_app, wait_for
+from helpers import (
+    ANSWER_MS,
+    PAGE_LOAD_MS,
+    chromium,
+    click_scene_centre,
+    room_yaml,
+    served_app,
+    wait_for,
+)
 
 pytestmark = pytest.mark.slow  # a real browser
 
@@ -40,7 +48,7 @@ def page(app):
             ),
         )
         pg.goto(app.url)
-        pg.get_by_role("tab", name="Run").wait_for(timeout=30000)
+        pg.get_by_role("tab", name="Run").wait_for(timeout=PAGE_LOAD_MS)
         pg.wait_for_timeout(1500)
         yield pg
 
@@ -112,7 +120,7 @@ def test_wheel_radius_in_the_panel_changes_the_motion(app, page):
     assert app.session.sim.state.twists[0, 0] == pytest.approx(5.0 * 0.05)
     # an invalid value is refused in the panel with the schema's message
     apply_robot_field(page, "body length (m)", "-1")
-    page.get_by_text("greater than 0").wait_for(timeout=5000)
+    page.get_by_text("greater than 0").wait_for(timeout=ANSWER_MS)
     assert app.session.robot_config("agv")["body"].get("length_m", 0.6) > 0
     assert page.errors == []
 
@@ -135,7 +143,7 @@ def test_a_maze_cell_clicked_in_the_editor_becomes_a_wall_the_lidar_sees(app, pa
     s.step(1)
     x = s.sim.state.poses[0, 0]
     assert s.sim.state.scans[0, 4] == pytest.approx(-0.5 - x, abs=1e-6)  # the new wall's face
-    page.get_by_text("is now a wall").wait_for(timeout=5000)
+    page.get_by_text("is now a wall").wait_for(timeout=ANSWER_MS)
     click_scene_centre(page)
     wait_for(lambda: not s.sim.world.grid.occupied[4, 4], what="the wall to go again")
     page.get_by_label("edit maze").uncheck()
@@ -146,7 +154,7 @@ def test_a_second_tab_watches_and_closing_it_does_not_stop_the_run(app, page):
     s = app.session
     other = page.context.browser.new_page()
     other.goto(app.url)
-    other.get_by_role("tab", name="Run").wait_for(timeout=30000)
+    other.get_by_role("tab", name="Run").wait_for(timeout=PAGE_LOAD_MS)
     wait_for(lambda: len(app.server.get_clients()) == 2, what="two clients")
     s.play()
     other.close()

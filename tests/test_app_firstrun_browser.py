@@ -13,7 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import chromium, click_scene_centre, room_yaml, served_app, wait_for
+from helpers import (
+    ANSWER_MS,
+    PAGE_LOAD_MS,
+    chromium,
+    click_scene_centre,
+    room_yaml,
+    served_app,
+    wait_for,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -47,7 +55,7 @@ def _open(browser, app):
     pg.on("console", lambda m: pg.console.append(f"{m.type}: {m.text}"))
     pg.on("pageerror", lambda e: pg.console.append(f"pageerror: {e}"))
     pg.goto(app.url)  # the per-launch token is in the URL
-    pg.get_by_role("tab", name="Run").wait_for(timeout=120000)
+    pg.get_by_role("tab", name="Run").wait_for(timeout=PAGE_LOAD_MS)
     pg.wait_for_timeout(1000)
     return pg
 
@@ -82,8 +90,8 @@ def test_the_plots_the_readme_describes_are_at_the_bottom_of_the_run_tab(app, pa
     app.session.play()
     wait_for(lambda: app.panel.plot_wheels is not None, what="the plots")
     app.session.pause()
-    page.get_by_text("wheel speeds (rad/s)").first.wait_for(timeout=60000)
-    page.get_by_text("body twist").first.wait_for(timeout=60000)
+    page.get_by_text("wheel speeds (rad/s)").first.wait_for(timeout=ANSWER_MS)
+    page.get_by_text("body twist").first.wait_for(timeout=ANSWER_MS)
     plots = page.get_by_text("wheel speeds (rad/s)").first.bounding_box()
     play = page.get_by_role("button", name="Play").bounding_box()
     assert plots["y"] > play["y"]  # below the run controls
@@ -103,7 +111,7 @@ def test_apply_says_what_it_did_next_to_the_button(app, page):
     s.sim.state.poses[1] = (-2.0, 0.3, 0.0)
     page.get_by_role("button", name="Apply").click()
     msg = page.get_by_text("placed at").first
-    msg.wait_for(timeout=60000)
+    msg.wait_for(timeout=ANSWER_MS)
     button = page.get_by_role("button", name="Apply").bounding_box()
     box = msg.bounding_box()
     assert 0 < box["y"] - button["y"] < 120  # right under the button
@@ -120,17 +128,17 @@ def test_a_refused_apply_marks_the_field_and_says_why_under_the_button(app, page
     page.wait_for_timeout(300)
     page.get_by_role("button", name="Apply").click()
     msg = page.get_by_text("greater than 0").first
-    msg.wait_for(timeout=60000)
+    msg.wait_for(timeout=ANSWER_MS)
     button = page.get_by_role("button", name="Apply").bounding_box()
     assert 0 < msg.bounding_box()["y"] - button["y"] < 160
-    page.get_by_label("\u26a0 body length (m)").wait_for(timeout=60000)
+    page.get_by_label("\u26a0 body length (m)").wait_for(timeout=ANSWER_MS)
     page.screenshot(path=str(_shots() / "apply_refused.png"))
     field = page.get_by_label("\u26a0 body length (m)")
     field.fill("0.6")
     field.press("Enter")
     page.wait_for_timeout(300)
     page.get_by_role("button", name="Apply").click()
-    page.get_by_text("applied").first.wait_for(timeout=60000)
+    page.get_by_text("applied").first.wait_for(timeout=ANSWER_MS)
 
 
 def test_wheel_plot_after_apply_shows_the_present_time(app, page):
@@ -139,7 +147,7 @@ def test_wheel_plot_after_apply_shows_the_present_time(app, page):
     s.play()
     wait_for(lambda: s.sim.state.t_s > 3.0, what="the run")
     page.get_by_role("button", name="Apply").click()
-    page.get_by_text("applied").first.wait_for(timeout=60000)
+    page.get_by_text("applied").first.wait_for(timeout=ANSWER_MS)
     wait_for(lambda: s.sim.state.t_s > 5.0, what="the run after Apply")
     wait_for(
         lambda: app.panel.plot_wheels is not None and len(app.panel.plot_wheels.data[0]) > 5,
@@ -233,7 +241,7 @@ def test_a_click_in_the_top_view_places_the_picked_robot(app, page):
             if attempt == 1:
                 raise AssertionError("; ".join(notes)) from None
             page.wait_for_timeout(1000)
-    page.get_by_text("agv placed at").first.wait_for(timeout=60000)
+    page.get_by_text("agv placed at").first.wait_for(timeout=ANSWER_MS)
     page.get_by_label("place robots").uncheck()
 
 

@@ -7,7 +7,15 @@ from __future__ import annotations
 
 import pytest
 
-from helpers import chromium, click_scene_centre, room_yaml, served_app, wait_for
+from helpers import (
+    ANSWER_MS,
+    PAGE_LOAD_MS,
+    chromium,
+    click_scene_centre,
+    room_yaml,
+    served_app,
+    wait_for,
+)
 
 pytestmark = pytest.mark.slow  # a real browser
 
@@ -27,7 +35,7 @@ def page(app):
         pg.errors = []  # type: ignore[attr-defined]
         pg.on("pageerror", lambda e: pg.errors.append(str(e)))
         pg.goto(app.url)
-        pg.get_by_role("tab", name="Run").wait_for(timeout=30000)
+        pg.get_by_role("tab", name="Run").wait_for(timeout=PAGE_LOAD_MS)
         pg.wait_for_timeout(1500)
         yield pg
 
@@ -67,7 +75,7 @@ def test_the_friction_brush_paints_the_floor_under_a_click(app, page):
     # the top view looks straight down on the map's centre: the middle cell (0, 0) m
     click_scene_centre(page)
     wait_for(lambda: s.sim.world.floor.mu_at(0.0, 0.0) == 0.1, what="the painted friction")
-    page.get_by_text("now has friction 0.1").wait_for(timeout=5000)
+    page.get_by_text("now has friction 0.1").wait_for(timeout=ANSWER_MS)
     assert s.sim.world.floor.mu_at(1.0, 0.0) == 0.8  # the next cell: the floor's
     assert not s.sim.world.grid.occupied[4, 4]  # painted, not turned into a wall
     assert s.config["world"]["floor"]["regions"][-1]["mu"] == 0.1  # kept in the scenario

@@ -11,10 +11,9 @@ import io
 import numpy as np
 import pytest
 
-from agvsim.bench_app import FLAGS
 from agvsim.net import free_port
 
-from helpers import CHROMIUM, need_browser, wait_for
+from helpers import PAGE_LOAD_MS, chromium, need_browser, wait_for
 
 pytestmark = pytest.mark.slow  # a real browser
 
@@ -38,7 +37,6 @@ ROOM = {
 def test_replay_page_plays_the_recording(tmp_path):
     need_browser()
     from PIL import Image
-    from playwright.sync_api import sync_playwright
 
     from agvsim.app.replay import ReplayApp, ReplaySession
     from agvsim.runner import run_scenario
@@ -48,13 +46,12 @@ def test_replay_page_plays_the_recording(tmp_path):
     session = ReplaySession(tmp_path / "run.mcap")
     app = ReplayApp(session, port=free_port()).start()
     try:
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        with chromium() as browser:
             page = browser.new_page(viewport={"width": 1280, "height": 800})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.goto(app.url)
-            page.get_by_role("button", name="Play").wait_for(timeout=30000)
+            page.get_by_role("button", name="Play").wait_for(timeout=PAGE_LOAD_MS)
             page.get_by_role("button", name="Top view").click()
             page.wait_for_timeout(1500)
             canvas = page.locator("canvas").first
@@ -70,7 +67,6 @@ def test_replay_page_plays_the_recording(tmp_path):
             assert session.t_s == t  # paused
             k = int(np.searchsorted(session.times, t + 1e-9, side="right")) - 1
             np.testing.assert_allclose(session.sim.state.poses, session.poses[k], atol=0)
-            browser.close()
         assert errors == []
     finally:
         app.stop()
