@@ -136,6 +136,16 @@ class TrackingConfig:
     # forwards new walls come into view far off; left out there as well, the measured gains
     # and losses did not make a default (docs/slam.md). None: every point is matched
     observed_share: float | None = 0.5
+    # each return is mapped as the mean of itself and its smooth_beams neighbours each side
+    # when they lie on one surface with it: joined (neighbours within surface_gap_m) and
+    # within smooth_dev_m of the chord between the outermost two (a corner sharper than that
+    # is mapped as seen; :func:`smooth_surface`). On a straight wall the mean lies on the
+    # wall and its range noise is 1/sqrt(3) of one return's: the field stamps the maximum
+    # over every scan, so each scan's noise widened the ridge (issue 19's twenty-second
+    # round: 3 cm more range noise doubled the thesis maze's error). Only the map is
+    # smoothed; scans are matched as measured. 0: every return mapped as measured
+    smooth_beams: int = 1
+    smooth_dev_m: float = 0.1
     l_hit: float = 0.85
     l_miss: float = -0.4
     l_clamp: float = 4.0
@@ -209,6 +219,8 @@ class TrackingConfig:
             raise bad("edge_on_max_step_m", "positive or None")
         if not self.l_miss < 0.0:
             raise bad("l_miss", "negative (a ray through a cell: free)")
+        if isinstance(self.smooth_beams, bool) or not isinstance(self.smooth_beams, int):
+            raise bad("smooth_beams", "a whole number of beams (0: not smoothed)")
 
 
 # TrackingConfig's fields that must be above 0, and those that may be 0 as well
@@ -236,6 +248,7 @@ _POSITIVE = (
     "relocalise_scans",
     "relocalise_window_m",
     "global_points",
+    "smooth_dev_m",
 )
 _NON_NEGATIVE = (
     "prior_lin_weight",
@@ -248,7 +261,56 @@ _NON_NEGATIVE = (
     "match_ceiling_rad",
     "unmatched_hold_scans",
     "global_cell_factor",
+    "smooth_beams",
 )
+
+
+@njit(cache=True)
+def smooth_surface(
+    ends: np.ndarray, hits: np.ndarray, max_gap_m: float, half: int, max_dev_m: float
+) -> np.ndarray:
+    """A copy of ``ends`` (in beam order) with each hit ``k`` replaced by the mean of the hits
+    ``k - w .. k + w``, for the largest ``w <= half`` whose run is one surface: every
+    neighbouring pair closer than ``max_gap_m`` and every point within ``max_dev_m`` of the
+    chord from ``k - w`` to ``k + w``. A hit with no such run (an end, an isolated return, a
+    sharp corner) and every non-hit stay as they are. Collinear hits stay on their line."""
+    n = ends.shape[0]
+    out = ends.copy()
+    for k in range(n):
+        if not hits[k]:
+            continue
+        for w in range(half, 0, -1):
+            if k - w < 0 or k + w >= n:
+                continue
+            ok = True
+            for j in range(k - w, k + w):
+                if not (hits[j] and hits[j + 1]):
+                    ok = False
+                    break
+                gap = math.hypot(ends[j + 1, 0] - ends[j, 0], ends[j + 1, 1] - ends[j, 1])
+                if gap > max_gap_m:
+                    ok = False
+                    break
+            if not ok:
+                continue
+            ax, ay = ends[k - w, 0], ends[k - w, 1]
+            dx, dy = ends[k + w, 0] - ax, ends[k + w, 1] - ay
+            chord = math.hypot(dx, dy)
+            if chord <= 0.0:
+                continue
+            for j in range(k - w + 1, k + w):
+                if abs((ends[j, 0] - ax) * dy - (ends[j, 1] - ay) * dx) / chord > max_dev_m:
+                    ok = False
+                    break
+            if not ok:
+                continue
+            sx, sy = 0.0, 0.0
+            for j in range(k - w, k + w + 1):
+                sx += ends[j, 0]
+                sy += ends[j, 1]
+            out[k, 0], out[k, 1] = sx / (2 * w + 1), sy / (2 * w + 1)
+            break
+    return out
 
 
 @njit(cache=True)
@@ -754,8 +816,17 @@ class Submap:
         """Ray-update the log-odds grid and stamp the hits into the live field (local frame),
         neighbouring ones joined (:func:`densify_surface`); with ``edge_on_turn_rad`` and
         ``edge_on``, edge-on ones spread along their wall (:func:`spread_edge_on`) and glimpses
-        through an opening left out (:func:`glimpses`)."""
+        through an opening left out (:func:`glimpses`); with ``smooth_beams``, each hit first
+        averaged with its neighbours on the same surface (:func:`smooth_surface`)."""
         res = cfg.resolution_m
+        if cfg.smooth_beams > 0:
+            ends = smooth_surface(
+                np.ascontiguousarray(ends, np.float64),
+                np.ascontiguousarray(hits),
+                cfg.surface_gap_m,
+                cfg.smooth_beams,
+                cfg.smooth_dev_m,
+            )
         update_log_odds(
             self.logodds,
             self.ox,
