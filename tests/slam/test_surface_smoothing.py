@@ -4,13 +4,13 @@ noise cut by sqrt(3)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from agvsim.slam.frontend import TrackingConfig, new_submap, smooth_surface
-from agvsim.slam.mapping import gaussian_kernel
+from agvsim.slam.frontend import Tracker, TrackingConfig, smooth_surface
 
 
 def _wall_scan(ranges_noise: np.ndarray | None = None, n: int = 61) -> np.ndarray:
@@ -86,17 +86,17 @@ def test_the_submap_maps_the_smoothed_returns_and_zero_turns_it_off():
     hits = np.ones(len(ends), bool)
 
     def off_the_wall_m(cfg: TrackingConfig) -> float:
-        cfg = TrackingConfig(**{**cfg.__dict__, "submap_half_size_m": 5.0, "resolution_m": 0.01})
-        s = new_submap(0, np.zeros(3), cfg, gaussian_kernel(cfg.sigma_m, cfg.resolution_m))
-        s.insert(cfg, np.zeros(2), ends, hits, 0)
+        cfg = dataclasses.replace(cfg, submap_half_size_m=5.0, resolution_m=0.01)
+        tracker = Tracker(cfg)
+        tracker.insert(0, np.zeros(3), np.zeros(2), ends, hits)
+        s = tracker.submaps[0]
         cells = np.argwhere(s.logodds > 0)
         x = s.ox + (cells[:, 1] + 0.5) * cfg.resolution_m  # the occupied cells' centres
         return float(np.abs(x - 2.0).mean())
 
     raw = off_the_wall_m(TrackingConfig(smooth_beams=0))
     smoothed = off_the_wall_m(TrackingConfig(smooth_beams=1))
-    print(raw, smoothed)
-    assert smoothed < 0.8 * raw
+    assert smoothed < 0.8 * raw  # 0.0307 against 0.0220 m, measured
 
 
 @pytest.mark.parametrize(

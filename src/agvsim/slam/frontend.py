@@ -816,17 +816,9 @@ class Submap:
         """Ray-update the log-odds grid and stamp the hits into the live field (local frame),
         neighbouring ones joined (:func:`densify_surface`); with ``edge_on_turn_rad`` and
         ``edge_on``, edge-on ones spread along their wall (:func:`spread_edge_on`) and glimpses
-        through an opening left out (:func:`glimpses`); with ``smooth_beams``, each hit first
-        averaged with its neighbours on the same surface (:func:`smooth_surface`)."""
+        through an opening left out (:func:`glimpses`). ``ends`` are mapped as given
+        (:meth:`Tracker.insert` smooths them first)."""
         res = cfg.resolution_m
-        if cfg.smooth_beams > 0:
-            ends = smooth_surface(
-                np.ascontiguousarray(ends, np.float64),
-                np.ascontiguousarray(hits),
-                cfg.surface_gap_m,
-                cfg.smooth_beams,
-                cfg.smooth_dev_m,
-            )
         update_log_odds(
             self.logodds,
             self.ox,
@@ -1284,8 +1276,18 @@ class Tracker:
     ) -> list[Submap]:
         """Insert a keyframe (local frame) into the active submaps, starting a new submap every
         half ``submap_keyframes`` or half ``submap_length_m`` of path, whichever comes first;
-        returns the submaps that got finished (full: either of the two)."""
+        returns the submaps that got finished (full: either of the two). With
+        ``smooth_beams``, each hit is first averaged with its neighbours on the same surface
+        (:func:`smooth_surface`), once for both submaps."""
         cfg = self.cfg
+        if cfg.smooth_beams > 0:
+            ends = smooth_surface(
+                np.ascontiguousarray(ends, np.float64),
+                np.ascontiguousarray(hits),
+                cfg.surface_gap_m,
+                cfg.smooth_beams,
+                cfg.smooth_dev_m,
+            )
         half = max(cfg.submap_keyframes // 2, 1)
         if not self.active or self._full(self.active[-1], half, 0.5 * cfg.submap_length_m):
             s = new_submap(len(self.submaps), pose, cfg, self.kernel)
