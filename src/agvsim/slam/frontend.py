@@ -191,6 +191,8 @@ class TrackingConfig:
                 f"TrackingConfig.{name} must be {allowed}, got {getattr(self, name)!r}"
             )
 
+        if isinstance(self.smooth_beams, bool) or not isinstance(self.smooth_beams, int):
+            raise bad("smooth_beams", "a whole number of beams (0: not smoothed)")
         for name in _POSITIVE:
             if not getattr(self, name) > 0:
                 raise bad(name, "positive")
@@ -219,8 +221,6 @@ class TrackingConfig:
             raise bad("edge_on_max_step_m", "positive or None")
         if not self.l_miss < 0.0:
             raise bad("l_miss", "negative (a ray through a cell: free)")
-        if isinstance(self.smooth_beams, bool) or not isinstance(self.smooth_beams, int):
-            raise bad("smooth_beams", "a whole number of beams (0: not smoothed)")
 
 
 # TrackingConfig's fields that must be above 0, and those that may be 0 as well
