@@ -519,3 +519,22 @@ def test_twist_of_wrong_shape_is_refused(kind: str) -> None:
 
 def test_ackermann_wide_track_large_steer() -> None:
     check_model(Ackermann(wheelbase_m=0.5, half_track_m=0.4, max_steer_rad=1.2))
+
+
+@given(
+    shape=st.sampled_from([(), (1,), (4,), (2, 3)]),
+    k=st.integers(1, 5),
+    seed=st.integers(0, 2**16),
+)
+def test_columns_is_np_stack_on_the_last_axis(shape, k, seed):
+    """The kinematics' ``columns`` (np.stack without its per-call cost) gives np.stack's
+    array bit for bit, a number filling its whole column."""
+    from agvsim.kinematics.base import columns
+
+    rng = np.random.default_rng(seed)
+    cols = [rng.standard_normal(shape) for _ in range(k)]
+    out = columns(*cols)
+    assert out.shape == shape + (k,) and out.dtype == np.float64
+    assert np.array_equal(out, np.stack(cols, axis=-1))
+    filled = columns(cols[0], 0.0, 2.5)
+    assert np.array_equal(filled, np.stack([cols[0], np.zeros(shape), np.full(shape, 2.5)], -1))

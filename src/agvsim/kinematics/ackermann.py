@@ -19,7 +19,7 @@ from typing import ClassVar, Literal
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, contact_heading
+from agvsim.kinematics.base import WheelState, as_twists, columns, contact_heading
 from agvsim.kinematics.params import HALF_TURN, check_params, param
 
 
@@ -57,7 +57,7 @@ class Ackermann:
         r, L = self.wheel_radius_m, self.wheelbase_m
         vx = r * (drive[..., 0] + drive[..., 1]) / 2.0
         d = np.zeros_like(vx) if steering is None else steering
-        return np.stack([vx, np.zeros_like(vx), vx * np.tan(d) / L], axis=-1)
+        return columns(vx, 0.0, vx * np.tan(d) / L)
 
     def inverse(self, twist: np.ndarray) -> WheelState:
         t = as_twists(twist)
@@ -73,8 +73,8 @@ class Ackermann:
         s_fl, s_fr = speed[..., 1], speed[..., 2]
         if self.steering_geometry == "parallel":
             a_fl, a_fr = delta, delta
-        speeds = np.stack([s_fl / r, s_fr / r, (vx - w * l) / r, (vx + w * l) / r], axis=-1)
-        return WheelState(speeds, np.stack([a_fl, a_fr], axis=-1), delta)
+        speeds = columns(s_fl / r, s_fr / r, (vx - w * l) / r, (vx + w * l) / r)
+        return WheelState(speeds, columns(a_fl, a_fr), delta)
 
     def drive_for(self, twist: np.ndarray, steering: np.ndarray) -> np.ndarray:
         """Rear wheel speeds that keep the commanded forward speed with the wheels at
@@ -82,13 +82,13 @@ class Ackermann:
         r, L, l = self.wheel_radius_m, self.wheelbase_m, self.half_track_m
         vx = twist[..., 0]
         w = vx * np.tan(steering) / L
-        return np.stack([(vx - w * l) / r, (vx + w * l) / r], axis=-1)
+        return columns((vx - w * l) / r, (vx + w * l) / r)
 
     def steer_angles_for(self, steering: np.ndarray) -> np.ndarray:
         """Per-wheel angles (front_left, front_right) for bicycle angle(s) ``steering``."""
         d = np.asarray(steering, dtype=np.float64)
         if self.steering_geometry == "parallel":
-            return np.stack([d, d], axis=-1)
+            return columns(d, d)
         L, l = self.wheelbase_m, self.half_track_m
         k = np.tan(d) / L  # curvature
         # wheel at (L, +-l): direction of (1 - k*(+-l), k L)

@@ -63,6 +63,16 @@ def integrate_se2(poses: np.ndarray, twists: np.ndarray, dt: float) -> np.ndarra
     return out.reshape(shape)
 
 
+def columns(*cols: np.ndarray | float) -> np.ndarray:
+    """``np.stack(cols, axis=-1)`` as float64 for columns of the first one's shape (a number
+    fills a whole column), without ``np.stack``'s per-call overhead: a simulation step calls
+    the kinematics once per model on a few robots, where that overhead outweighs the sums."""
+    out = np.empty(np.shape(cols[0]) + (len(cols),))
+    for k, c in enumerate(cols):
+        out[..., k] = c
+    return out
+
+
 def saturation_scale(speeds: np.ndarray, max_speed: np.ndarray | float) -> np.ndarray:
     """Per-robot factor in (0, 1] that brings every wheel speed of ``speeds (N, W)`` within
     ``max_speed`` rad/s. Scaling all wheels of a robot by one factor keeps the direction of

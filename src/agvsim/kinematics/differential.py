@@ -13,7 +13,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists
+from agvsim.kinematics.base import WheelState, as_twists, columns
 from agvsim.kinematics.params import check_params, param
 
 
@@ -39,7 +39,7 @@ class DifferentialDrive:
         pl, pr = drive[..., 0], drive[..., 1]
         vx = r * (pr + pl) / 2.0
         w = r * (pr - pl) / (2.0 * l)
-        return np.stack([vx, np.zeros_like(vx), w], axis=-1)
+        return columns(vx, 0.0, w)
 
     def inverse(self, twist: np.ndarray) -> WheelState:
         t = as_twists(twist)
@@ -50,7 +50,7 @@ class DifferentialDrive:
     def drive_for(self, twist: np.ndarray, steering: np.ndarray | None) -> np.ndarray:
         r, l = self.wheel_radius_m, self.half_track_m
         vx, w = twist[..., 0], twist[..., 2]
-        return np.stack([(vx - w * l) / r, (vx + w * l) / r], axis=-1)
+        return columns((vx - w * l) / r, (vx + w * l) / r)
 
     def wheel_positions_m(self) -> np.ndarray:
         l = np.asarray(self.half_track_m, dtype=np.float64)

@@ -16,7 +16,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists
+from agvsim.kinematics.base import WheelState, as_twists, columns
 from agvsim.kinematics.params import check_params, param
 
 
@@ -51,7 +51,7 @@ class Mecanum:
         vx = r / 4.0 * (w1 + w2 + w3 + w4)
         vy = r / 4.0 * (-w1 + w2 + w3 - w4)
         om = r / (4.0 * k) * (-w1 + w2 - w3 + w4)
-        return np.stack([vx, vy, om], axis=-1)
+        return columns(vx, vy, om)
 
     def inverse(self, twist: np.ndarray) -> WheelState:
         t = as_twists(twist)
@@ -62,14 +62,11 @@ class Mecanum:
         r = self.wheel_radius_m
         k = self.half_length_m + self.half_width_m
         vx, vy, om = twist[..., 0], twist[..., 1], twist[..., 2]
-        return np.stack(
-            [
-                (vx - vy - k * om) / r,
-                (vx + vy + k * om) / r,
-                (vx + vy - k * om) / r,
-                (vx - vy + k * om) / r,
-            ],
-            axis=-1,
+        return columns(
+            (vx - vy - k * om) / r,
+            (vx + vy + k * om) / r,
+            (vx + vy - k * om) / r,
+            (vx - vy + k * om) / r,
         )
 
     def wheel_positions_m(self) -> np.ndarray:

@@ -15,7 +15,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists
+from agvsim.kinematics.base import WheelState, as_twists, columns
 from agvsim.kinematics.params import check_params, param
 
 _A = np.deg2rad([0.0, 120.0, 240.0])
@@ -43,7 +43,7 @@ class Omni3:
         vx = 2.0 * r / 3.0 * (drive @ -_S)
         vy = 2.0 * r / 3.0 * (drive @ _C)
         om = r / (3.0 * R) * drive.sum(axis=-1)
-        return np.stack([vx, vy, om], axis=-1)
+        return columns(vx, vy, om)
 
     def inverse(self, twist: np.ndarray) -> WheelState:
         t = as_twists(twist)

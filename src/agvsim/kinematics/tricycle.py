@@ -18,7 +18,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from agvsim.kinematics.base import WheelState, as_twists, wheel_heading
+from agvsim.kinematics.base import WheelState, as_twists, columns, wheel_heading
 from agvsim.kinematics.params import check_params, param
 
 
@@ -46,15 +46,15 @@ class Tricycle:
         r, L = self.wheel_radius_m, self.wheelbase_m
         u = drive[..., 0]
         d = np.zeros_like(u) if steering is None else steering
-        return np.stack([r * u * np.cos(d), np.zeros_like(u), r * u * np.sin(d) / L], axis=-1)
+        return columns(r * u * np.cos(d), 0.0, r * u * np.sin(d) / L)
 
     def inverse(self, twist: np.ndarray) -> WheelState:
         t = as_twists(twist)
         r, L, l = self.wheel_radius_m, self.wheelbase_m, self.half_track_m
         vx, w = t[..., 0], t[..., 2]
-        planar = np.stack([vx, np.zeros_like(vx), w], axis=-1)
+        planar = columns(vx, 0.0, w)
         delta, speed = wheel_heading(L, 0.0, planar)
-        speeds = np.stack([speed / r, (vx - w * l) / r, (vx + w * l) / r], axis=-1)
+        speeds = columns(speed / r, (vx - w * l) / r, (vx + w * l) / r)
         return WheelState(speeds, delta[..., None], delta)
 
     def drive_for(self, twist: np.ndarray, steering: np.ndarray) -> np.ndarray:
