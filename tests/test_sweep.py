@@ -5,6 +5,7 @@ stopped; bad sweeps are refused, naming the variation and the field, before anyt
 from __future__ import annotations
 
 import json
+import signal
 from pathlib import Path
 
 import pyarrow.csv as pcsv
@@ -120,11 +121,15 @@ def test_local_processes_give_the_same_table(clean, tmp_path):
 @pytest.mark.slow
 def test_ray_gives_the_same_table(clean, tmp_path):
     pytest.importorskip("ray")
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     on_ray = run_sweep(
         write(tmp_path, GRID), out_dir=tmp_path / "out", workers=2, ray=True, plots=False
     )
     assert on_ray.executed == 12 and not on_ray.failed
     assert without_wall(on_ray.table).equals(without_wall(clean.table))
+    # the Ray it started is gone, and so are the handlers it set: Ctrl-C and SIGTERM do in
+    # the caller's program what they did before (Ray's SIGTERM handler had stayed behind)
+    assert {s: signal.getsignal(s) for s in before} == before
 
 
 def test_an_interrupted_sweep_resumes_where_it_stopped(clean, tmp_path):

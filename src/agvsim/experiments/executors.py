@@ -15,6 +15,7 @@ import multiprocessing
 import os
 import signal
 import socket
+import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -107,6 +108,7 @@ def run_ray(
             "Ray is not installed: pip install 'agvsim[ray]' (or pip install 'ray>=2.9,<3')"
         ) from None
     started = False
+    handlers: dict[int, Any] = {}
     if not ray.is_initialized():
         address = address or os.environ.get("RAY_ADDRESS") or None
         kwargs: dict[str, Any] = {"logging_level": "ERROR", "log_to_driver": False}
@@ -121,9 +123,11 @@ def run_ray(
             )
         if address:
             _check_reachable(address)
+        handlers = _signal_handlers()  # Ray's start replaces SIGTERM's (and may SIGINT's)
         try:
             ray.init(**kwargs)
         except Exception as err:  # noqa: BLE001 - Ray raises many kinds; say what failed
+            _restore(handlers)
             where = f"connect to the Ray cluster at {address}" if address else "start Ray"
             raise RuntimeError(f"could not {where}: {type(err).__name__}: {err}") from None
         started = True
@@ -145,6 +149,26 @@ def run_ray(
             ray.cancel(ref, force=True)
         if started:
             ray.shutdown()
+            _restore(handlers)  # the caller's Ctrl-C and SIGTERM handling, as it was
+
+
+_HANDLED = (signal.SIGINT, signal.SIGTERM)
+
+
+def _signal_handlers() -> dict[int, Any]:
+    """The handlers of SIGINT and SIGTERM now (empty off the main thread, where Python can
+    neither read nor set them)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {int(s): signal.getsignal(s) for s in _HANDLED}
+
+
+def _restore(handlers: dict[int, Any]) -> None:
+    """Put back handlers taken by :func:`_signal_handlers` (one set outside Python, which
+    ``getsignal`` reads as None, cannot be put back and is left as it is)."""
+    for signum, handler in handlers.items():
+        if handler is not None:
+            signal.signal(signum, handler)
 
 
 def _check_reachable(address: str) -> None:
