@@ -35,7 +35,7 @@ from agvsim.control.api import (
 from agvsim.dynamics.spec import FloorFriction
 from agvsim.dynamics.vehicle import Dynamics
 from agvsim.geometry import box_tables
-from agvsim.kinematics import actuation
+from agvsim.kinematics import actuation, fused
 from agvsim.kinematics.base import _integrate_rows, stack_models
 from agvsim.sensors.camera_rig import CameraFrame, CameraRig
 from agvsim.sensors.range_sensor import apply_noise
@@ -94,6 +94,8 @@ class _Group:
     rel: np.ndarray | None = None  # (k, 1) encoder noise, None when zero for all
     abs: np.ndarray | None = None
     steer_noise: np.ndarray | None = None
+    car: int | None = None  # agvsim.kinematics.fused kind: actuated in one kernel call
+    car_params: np.ndarray | None = None  # (k, 6) fused.car_params of the model
 
 
 class Simulation:
@@ -193,6 +195,7 @@ class Simulation:
             dw = list(model.driven_wheels)
             consecutive = idx == list(range(idx[0], idx[0] + len(idx)))
             o = odo[idx]
+            car = fused.car_kind(model)
             groups.append(
                 _Group(
                     idx=np.array(idx),
@@ -206,6 +209,8 @@ class Simulation:
                     rel=o[:, 0:1] if np.any(o[:, 0] > 0) else None,
                     abs=o[:, 1:2] if np.any(o[:, 1] > 0) else None,
                     steer_noise=o[:, 2] if model.has_steering and np.any(o[:, 2] > 0) else None,
+                    car=car,
+                    car_params=None if car is None else fused.car_params(model, len(idx)),
                 )
             )
         return groups
@@ -585,6 +590,9 @@ class Simulation:
         st, dt = self.state, self.dt_s
         twist = np.zeros((self.n, 3))
         for g in self._groups:
+            if g.car is not None:
+                self._actuate_car(g, twist)
+                continue
             is_tw = st.cmd_is_twist[g.idx]
             for sel, by_twist in ((is_tw, True), (~is_tw, False)):
                 if not sel.any():
@@ -606,6 +614,33 @@ class Simulation:
             twist[st.stopped] = 0.0
             st.wheel_speeds[st.stopped] = 0.0
         return twist
+
+    def _actuate_car(self, g: _Group, twist: np.ndarray) -> None:
+        """A tricycle or Ackermann group's actuation in one kernel call (both modes; the same
+        equations as agvsim.kinematics.actuation, agvsim.kinematics.fused)."""
+        st, sel = self.state, g.sel
+        assert g.car is not None and g.car_params is not None
+        k = len(g.idx)
+        tw, wheels = np.empty((k, 3)), np.empty((k, g.n_wheels))
+        steering, angles = np.empty(k), np.empty((k, g.n_steer))
+        fused.actuate_car(
+            g.car,
+            getattr(g.model, "steering_geometry", "") == "parallel",
+            g.car_params,
+            st.cmd_is_twist[sel],
+            st.cmd_twist[sel],
+            st.cmd_wheels[sel],
+            st.steering[sel],
+            self.dt_s,
+            tw,
+            wheels,
+            steering,
+            angles,
+        )
+        twist[sel] = tw
+        st.wheel_speeds[sel, : g.n_wheels] = wheels
+        st.steering[sel] = steering
+        st.steer_angles[sel, : g.n_steer] = angles
 
     def _apply_dynamics(self, twist: np.ndarray) -> None:
         """Robots with dynamics: the actuated wheel speeds and steering become targets of
