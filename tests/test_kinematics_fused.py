@@ -45,24 +45,19 @@ def _close(got: np.ndarray, want: np.ndarray) -> None:
 
 
 finite = st.floats(-3.0, 3.0, allow_nan=False)
+SIZES = {
+    "wheel_radius_m": st.floats(0.02, 0.5),
+    "wheelbase_m": st.floats(0.1, 2.0),
+    "half_track_m": st.floats(0.05, 1.0),
+    "max_wheel_speed_rad_s": st.floats(1.0, 60.0),
+    "max_steer_rate_rad_s": st.floats(0.1, 10.0),
+}
 models = st.one_of(
-    st.builds(
-        Tricycle,
-        wheel_radius_m=st.floats(0.02, 0.5),
-        wheelbase_m=st.floats(0.1, 2.0),
-        half_track_m=st.floats(0.05, 1.0),
-        max_wheel_speed_rad_s=st.floats(1.0, 60.0),
-        max_steer_rad=st.floats(0.1, math.pi / 2),
-        max_steer_rate_rad_s=st.floats(0.1, 10.0),
-    ),
+    st.builds(Tricycle, **SIZES, max_steer_rad=st.floats(0.1, math.pi / 2)),
     st.builds(
         Ackermann,
-        wheel_radius_m=st.floats(0.02, 0.5),
-        wheelbase_m=st.floats(0.1, 2.0),
-        half_track_m=st.floats(0.05, 1.0),
-        max_wheel_speed_rad_s=st.floats(1.0, 60.0),
+        **SIZES,
         max_steer_rad=st.floats(0.1, 0.99 * HALF_PI),
-        max_steer_rate_rad_s=st.floats(0.1, 10.0),
         steering_geometry=st.sampled_from(["ackermann", "parallel"]),
     ),
 )
