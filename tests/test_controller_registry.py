@@ -7,6 +7,7 @@ from __future__ import annotations
 import typing
 from dataclasses import dataclass
 
+import numpy as np
 import pytest
 
 from agvsim.app.mask import controller_types
@@ -50,19 +51,52 @@ def test_the_schema_and_the_app_offer_exactly_the_registered_types():
     assert controller_types(allow_python=True) == list(BEHAVIOURS)
 
 
-def test_robots_sharing_an_avoid_config_are_one_batched_binding():
-    other = {**AVOID, "trigger_m": 0.6}
-    sim = build(parse_scenario(_scenario(AVOID, SCRIPT, AVOID, {"type": "idle"}, other)))
+def test_robots_avoiding_with_one_sensor_are_one_batched_binding():
+    """Avoidance robots reading the same sensor share one batch controller, each with its own
+    trigger, speed and side clearance; another heading source makes another group."""
+    other = {**AVOID, "trigger_m": 0.6, "speed_m_s": 0.3}
+    by_odometry = {**AVOID, "heading_source": "odometry"}
+    sim = build(parse_scenario(_scenario(AVOID, SCRIPT, AVOID, other, by_odometry)))
     shapes = [(type(b.controller).__name__, b.robots, b.batch) for b in sim.bindings]
     assert shapes == [
         ("ScriptController", (1,), False),  # one robot's controllers first, in robot order
-        ("ObstacleAvoidance", (0, 2), True),  # then the groups: r0 and r2 share a config
-        ("ObstacleAvoidance", (4,), True),  # r4's trigger differs; r3 idles: no binding
+        ("ObstacleAvoidance", (0, 2, 3), True),  # then the groups
+        ("ObstacleAvoidance", (4,), True),
     ]
     avoid = sim.bindings[1].controller
     assert isinstance(avoid, ObstacleAvoidance) and avoid.sensor == "lidar"
-    assert avoid.trigger_m == 0.8 and sim.bindings[2].controller.trigger_m == 0.6
+    assert avoid.trigger_m.tolist() == [0.8, 0.8, 0.6]
+    assert avoid.speed.tolist() == [0.5, 0.5, 0.3]
+    assert avoid.side_clear.tolist() == pytest.approx([0.64, 0.64, 0.48])  # 0.8 x trigger
+    assert sim.bindings[2].controller.heading_source == "odometry"
     assert isinstance(sim.bindings[0].controller, ScriptController)
+
+
+def test_a_batch_of_avoiders_drives_each_robot_as_it_would_alone():
+    """Three robots of different models and settings, batched in one controller, move
+    exactly as when each has a controller of its own (each reads an identical copy of the
+    lidar under a name of its own, which puts it in a group alone): the settings are each
+    robot's, nothing of one robot's leaks into another's."""
+    settings = [AVOID, {**AVOID, "speed_m_s": 0.8, "trigger_m": 0.5}, {**AVOID, "trigger_m": 1.0}]
+    copies = [{"type": "lidar", "name": n, "beams": 16} for n in ("lidar", "copy1", "copy2")]
+    runs = []
+    for apart in (False, True):
+        data = _scenario(*settings)
+        models = ["differential", "mecanum", "omni3"]
+        for k, (robot, model) in enumerate(zip(data["robots"], models, strict=True)):
+            robot["model"], robot["sensors"] = model, copies
+            robot["controller"] = {
+                **robot["controller"],
+                "sensor": copies[k if apart else 0]["name"],
+            }
+        sim = build(parse_scenario(data))
+        for _ in range(400):
+            sim.step()
+        runs.append(sim)
+    assert [b.robots for b in runs[0].bindings] == [(0, 1, 2)]
+    assert [b.robots for b in runs[1].bindings] == [(0,), (1,), (2,)]
+    np.testing.assert_array_equal(runs[0].state.poses, runs[1].state.poses)
+    assert runs[0].state.distance_m.min() > 1.0  # they drove
 
 
 def test_flags_of_a_type_reach_its_binding(tmp_path):

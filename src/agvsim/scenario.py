@@ -65,6 +65,7 @@ from agvsim.sim.engine import S_MAX, W_MAX, Binding, Simulation
 from agvsim.sim.spec import (
     BODY_HEIGHT_M,
     WALL_HEIGHT_M,
+    ControlMode,
     OdometrySpec,
     RobotSpec,
     World,
@@ -445,7 +446,7 @@ def _bindings(
             if kind.check is not None:
                 kind.check(cfg, ctx)
             if kind.build_group is not None:
-                groups.setdefault(_group_key(cfg, specs[i]), []).append(ctx)
+                groups.setdefault(_group_key(kind, cfg, specs[i]), []).append(ctx)
                 continue
             ctrl = None if kind.build is None else kind.build(cfg, ctx)
         except ValueError as err:
@@ -456,19 +457,22 @@ def _bindings(
             ctrl = _keep_clear(ctrl, specs[i], static)
         out.append(Binding(ctrl, (i,), user_code=kind.user_code))
     for ctxs in groups.values():
-        cfg = sc.robots[ctxs[0].robot_index].controller
-        build_group = BEHAVIOURS[cfg.type].build_group
+        cfgs = [sc.robots[c.robot_index].controller for c in ctxs]
+        build_group = BEHAVIOURS[cfgs[0].type].build_group
         assert build_group is not None  # only batched types are grouped
-        out.append(Binding(build_group(cfg, ctxs), tuple(c.robot_index for c in ctxs), batch=True))
+        out.append(Binding(build_group(cfgs, ctxs), tuple(c.robot_index for c in ctxs), batch=True))
     return out
 
 
-def _group_key(cfg: Any, spec: RobotSpec) -> tuple:
-    """Robots batched in one controller share the config, the model's kind, the control mode
-    and the model's non-numeric parameters (``stack_models`` needs them equal)."""
+def _group_key(kind: Any, cfg: Any, spec: RobotSpec) -> tuple:
+    """Robots batched in one controller share the behaviour's ``group_key`` (default: the
+    config and the model's kind) and the control mode; in forward mode also the model's kind
+    and its non-numeric parameters (the wheel speeds come from ``stack_models`` of them)."""
     model: Any = spec.model
     texts = tuple(v for f in dc_fields(model) if isinstance(v := getattr(model, f.name), str))
-    return (cfg, type(model), spec.mode, texts)
+    shared = (cfg, type(model)) if kind.group_key is None else kind.group_key(cfg, spec)
+    forward = spec.mode == ControlMode.FORWARD
+    return (shared, spec.mode, type(model) if forward else None, texts if forward else ())
 
 
 def _controller_problem(i: int, name: str, cfg: Any, err: ValueError) -> str:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import importlib.util
 import inspect
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -54,8 +54,9 @@ class Behaviour:
     """One controller type of a scenario file.
 
     ``build(config, ctx)`` makes one robot's controller (None: no controller, the robot
-    idles). A batched type gives ``build_group(config, ctxs)`` instead: one controller for
-    all the robots whose configs are equal and whose models are of one kind and mode; its
+    idles). A batched type gives ``build_group(configs, ctxs)`` instead: one controller for
+    all the robots whose ``group_key(config, spec)`` is equal (default: the config itself,
+    and the model's kind), in one control mode (and of one model kind in forward mode); its
     ``check(config, ctx)`` refuses a robot it cannot drive before any is built. Builders
     raise ValueError starting with the config field at fault (``"sensor: ..."``).
     ``keep_clear``: slowed to stop short of robots its lidar sees (agvsim.control.traffic);
@@ -64,7 +65,8 @@ class Behaviour:
 
     config: type[ControllerConfigBase]
     build: Callable[[Any, ControllerContext], Any] | None = None
-    build_group: Callable[[Any, Sequence[ControllerContext]], Any] | None = None
+    build_group: Callable[[Sequence[Any], Sequence[ControllerContext]], Any] | None = None
+    group_key: Callable[[Any, RobotSpec], Hashable] | None = None
     check: Callable[[Any, ControllerContext], None] | None = None
     keep_clear: bool = False
     user_code: bool = False
@@ -138,19 +140,42 @@ def check_avoid(cfg: AvoidConfig, ctx: ControllerContext) -> None:
         )
 
 
-def build_avoid(cfg: AvoidConfig, ctxs: Sequence[ControllerContext]) -> Any:
+def avoid_group_key(cfg: AvoidConfig, spec: RobotSpec) -> Hashable:
+    """Robots batched in one avoidance controller: the sensor it reads and the heading source
+    alike, and the beams of that sensor and of the lidar that sees other robots (the cone
+    beams and the robots' sight are worked out once a group). Speeds, trigger, turn rate and
+    side clearance are each robot's own, and so is the model's kind in inverse mode."""
+    seen = sight_sensor(spec)
+    beams = tuple(
+        (s.name, s.num_beams, s.beam_angles_rad.tobytes(), tuple(s.mount_xy_m), s.mount_yaw_rad)
+        for s in spec.sensors
+        if s.name in (cfg.sensor, seen)
+    )
+    return (cfg.type, cfg.sensor, cfg.heading_source, seen, beams)
+
+
+def build_avoid(cfgs: Sequence[AvoidConfig], ctxs: Sequence[ControllerContext]) -> Any:
     """The thesis's obstacle avoidance for a group of robots, batched (wrapped to command
-    wheel speeds when the group is in forward mode)."""
+    wheel speeds when the group is in forward mode); each robot keeps its own speed, trigger,
+    turn rate and side clearance."""
     specs = [_spec(c) for c in ctxs]
-    spec0 = specs[0]
+    spec0, cfg = specs[0], cfgs[0]
     sensor = next(s for s in spec0.sensors if s.name == cfg.sensor)
     front, back = cone_beams(sensor)
     static = ctxs[0].static
+    trigger = np.array([c.trigger_m for c in cfgs])
+    side = [c.side_clearance_m for c in cfgs]
     ctrl: Any = construct(
         ObstacleAvoidance,
         cfg,
         front_beams=front,
         back_beams=back,
+        trigger_m=trigger,
+        speed_m_s=np.array([c.speed_m_s for c in cfgs]),
+        turn_rate_rad_s=np.array([c.turn_rate_rad_s for c in cfgs]),
+        side_clearance_m=np.array(
+            [0.8 * t if v is None else v for t, v in zip(trigger, side, strict=True)]
+        ),
         can_spin=np.array([_can_spin(s.model) for s in specs]),
         sight=RobotSight.for_robots(specs, static, sight_sensor(spec0) or ""),  # type: ignore[arg-type]
     )
@@ -243,7 +268,9 @@ class IdleConfig(ControllerConfigBase):
 
 BASIC: dict[str, Behaviour] = {
     "script": Behaviour(ScriptConfig, build=build_script),
-    "avoid": Behaviour(AvoidConfig, build_group=build_avoid, check=check_avoid),
+    "avoid": Behaviour(
+        AvoidConfig, build_group=build_avoid, group_key=avoid_group_key, check=check_avoid
+    ),
     "python": Behaviour(PythonControllerConfig, build=build_python, user_code=True),
     "idle": Behaviour(IdleConfig),
 }

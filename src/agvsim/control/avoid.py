@@ -48,11 +48,11 @@ class ObstacleAvoidance:
         sensor: str = "rangers",
         front_beams: tuple[int, ...] = (0,),
         back_beams: tuple[int, ...] = (2,),
-        trigger_m: float = 0.8,
+        trigger_m: float | np.ndarray = 0.8,
         side_beams: tuple[tuple[int, ...], tuple[int, ...]] | None = None,
-        side_clearance_m: float | None = None,
-        speed_m_s: float = 0.5,
-        turn_rate_rad_s: float = 1.0,
+        side_clearance_m: float | np.ndarray | None = None,
+        speed_m_s: float | np.ndarray = 0.5,
+        turn_rate_rad_s: float | np.ndarray = 1.0,
         turn_angle_rad: float = np.pi / 2,
         can_spin: np.ndarray | bool = True,
         tolerance_rad: float = 0.01,
@@ -72,7 +72,9 @@ class ObstacleAvoidance:
         # (left, right) beams; None: a quarter turn either side of the front beams (found on the
         # first step, when the number of beams is known)
         self.side_beams = side_beams
-        self.side_clear = 0.8 * trigger_m if side_clearance_m is None else side_clearance_m
+        self.side_clear = (
+            0.8 * np.asarray(trigger_m) if side_clearance_m is None else side_clearance_m
+        )
         if heading_source not in ("true_pose", "odometry"):
             raise ValueError(
                 f"heading_source must be 'true_pose' or 'odometry', got {heading_source!r}"
@@ -90,6 +92,20 @@ class ObstacleAvoidance:
         self.held_since = np.full(k, np.nan)  # since when another robot holds it still
         self._started = False
         self._left = self._right = np.zeros(0, dtype=np.int64)
+        # (k, 8) settings of each robot: a number is every robot's, an array one each
+        values = (
+            self.trigger_m,
+            self.speed,
+            self.rate,
+            self.turn_angle,
+            self.tol,
+            self.backoff_s,
+            float(self.snap),
+            self.side_clear,
+        )
+        self._params = np.empty((k, len(values)))
+        for c, v in enumerate(values):
+            self._params[:, c] = np.asarray(v, dtype=np.float64)
 
     def _snap(self, heading: np.ndarray) -> np.ndarray:
         """Round a target heading to the nearest multiple of the turn angle (walls of a maze
@@ -116,18 +132,7 @@ class ObstacleAvoidance:
             self._left = np.asarray(left, dtype=np.int64)
             self._right = np.asarray(right, dtype=np.int64)
             self._started = True
-        params = np.array(
-            [
-                self.trigger_m,
-                self.speed,
-                self.rate,
-                self.turn_angle,
-                self.tol,
-                self.backoff_s,
-                float(self.snap),
-                self.side_clear,
-            ]
-        )
+        params = self._params
         k = len(heading)
         robot_front, robot_back = np.full(k, np.inf), np.full(k, np.inf)
         walls_back = np.full(k, np.inf)
@@ -203,7 +208,7 @@ class ObstacleAvoidance:
             self.until[i] = t_s + self.backoff_s
             self.back_dir[i] = 1.0 if front[i] > back[i] else -1.0
             self.held_since[i] = np.nan
-            cmd[i] = (0.5 * self.speed * self.back_dir[i], 0.0, 0.0)
+            cmd[i] = (0.5 * self._params[i, 1] * self.back_dir[i], 0.0, 0.0)
         return True
 
     def state_names(self) -> list[str]:
@@ -265,12 +270,14 @@ def _avoid_step(
     params,
     cmd,
 ):
-    """One step of the state machine for every robot; writes twists into ``cmd (k, 3)``."""
-    trigger, speed, rate, turn, tol, backoff_s = params[:6]
-    snap = params[6] > 0.5
-    side_clear = params[7]
-    close = 0.45 * trigger
+    """One step of the state machine for every robot; writes twists into ``cmd (k, 3)``.
+    ``params (k, 8)``: each robot's trigger, speed, turn rate, turn angle, tolerance, back-off
+    time, snap (1.0 or 0.0) and side clearance."""
     for i in range(state.shape[0]):
+        trigger, speed, rate, turn, tol, backoff_s = params[i, :6]
+        snap = params[i, 6] > 0.5
+        side_clear = params[i, 7]
+        close = 0.45 * trigger
         front = min(_nearest(ranges, i, front_beams), robot_front[i])
         back = min(_nearest(ranges, i, back_beams) if back_beams.size else np.inf, robot_back[i])
         h = heading[i]
