@@ -33,7 +33,7 @@ from pydantic import Field, model_validator
 from agvsim.config_base import StrictConfig, construct, did_you_mean
 from agvsim.control.adapters import WheelsFromTwist
 from agvsim.control.api import ControllerContext
-from agvsim.control.avoid import ObstacleAvoidance
+from agvsim.control.avoid import SIDE_PER_TRIGGER, ObstacleAvoidance
 from agvsim.control.script import ScriptController, ScriptStep
 from agvsim.control.traffic import RobotSight, sight_sensor
 from agvsim.kinematics import stack_models
@@ -174,7 +174,7 @@ def build_avoid(cfgs: Sequence[AvoidConfig], ctxs: Sequence[ControllerContext]) 
         speed_m_s=np.array([c.speed_m_s for c in cfgs]),
         turn_rate_rad_s=np.array([c.turn_rate_rad_s for c in cfgs]),
         side_clearance_m=np.array(
-            [0.8 * t if v is None else v for t, v in zip(trigger, side, strict=True)]
+            [SIDE_PER_TRIGGER * t if v is None else v for t, v in zip(trigger, side, strict=True)]
         ),
         can_spin=np.array([_can_spin(s.model) for s in specs]),
         sight=RobotSight.for_robots(specs, static, sight_sensor(spec0) or ""),  # type: ignore[arg-type]

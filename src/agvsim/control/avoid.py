@@ -37,6 +37,7 @@ from agvsim.control.api import BatchObservation
 from agvsim.control.traffic import RobotSight
 
 DRIVE, TURN, REVERSE, BACKOFF = 0, 1, 2, 3
+SIDE_PER_TRIGGER = 0.8  # the default side clearance, in units of the trigger distance
 STATE_NAMES = ("drive", "turn_right", "reverse", "back_off")
 
 
@@ -73,7 +74,9 @@ class ObstacleAvoidance:
         # first step, when the number of beams is known)
         self.side_beams = side_beams
         self.side_clear = (
-            0.8 * np.asarray(trigger_m) if side_clearance_m is None else side_clearance_m
+            SIDE_PER_TRIGGER * np.asarray(trigger_m)
+            if side_clearance_m is None
+            else side_clearance_m
         )
         if heading_source not in ("true_pose", "odometry"):
             raise ValueError(

@@ -96,6 +96,7 @@ class _Group:
     steer_noise: np.ndarray | None = None
     car: int | None = None  # agvsim.kinematics.fused kind: actuated in one kernel call
     car_params: np.ndarray | None = None  # (k, 6) fused.car_params of the model
+    car_parallel: bool = False  # an Ackermann group with the thesis's parallel steering
 
 
 class Simulation:
@@ -211,6 +212,7 @@ class Simulation:
                     steer_noise=o[:, 2] if model.has_steering and np.any(o[:, 2] > 0) else None,
                     car=car,
                     car_params=None if car is None else fused.car_params(model, len(idx)),
+                    car_parallel=getattr(model, "steering_geometry", "") == "parallel",
                 )
             )
         return groups
@@ -625,7 +627,7 @@ class Simulation:
         steering, angles = np.empty(k), np.empty((k, g.n_steer))
         fused.actuate_car(
             g.car,
-            getattr(g.model, "steering_geometry", "") == "parallel",
+            g.car_parallel,
             g.car_params,
             st.cmd_is_twist[sel],
             st.cmd_twist[sel],
