@@ -4,12 +4,16 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from agvsim.angles import wrap_angle, wrap_scalar
 from agvsim.slam.se2 import between
+
+if TYPE_CHECKING:
+    from agvsim.slam.scale_pairs import PairScale
 
 __all__ = ["OdometryFusion"]
 
@@ -48,7 +52,10 @@ class OdometryFusion:
     of odometry ``o`` (robot frame; zero-mean match noise leaves it unbiased; a memory of
     a few thousand scans, longer than the noises' window), and :class:`~.frontend.Tracker`
     drives with odometry's increments scaled by it;
-    the noises are learnt from the scaled increments.
+    the noises are learnt from the scaled increments. Those matches agree with the map that
+    tracking drew, and over the first metres odometry draws it: with :attr:`pairs` set
+    (:class:`~.graph_slam.GraphSlam` sets it by default) the scale is instead the one measured
+    between raw scans a metre apart, free of that map (:mod:`agvsim.slam.scale_pairs`).
 
     Until it is :meth:`ready`, the pose is odometry's alone (and :class:`~.graph_slam.GraphSlam`
     processes those first scans again with the learnt noises, :meth:`preset`).
@@ -90,6 +97,8 @@ class OdometryFusion:
         self.sharp: list[float] = []
         self._k = (1.0, 1.0, 1.0, 1.0)  # see estimate()
         self._scale = 1.0  # see scale()
+        # odometry's scale measured scan to scan (GraphSlam sets it): the scale, when set
+        self.pairs: PairScale | None = None
         self._scale_sums = (0.0, 0.0, 0.0)  # sum m.o, sum o.o, path (m), with forgetting
         self._count = 0
         self.turn_ratio = 0.0  # see estimate_turn_ratio()
@@ -159,13 +168,13 @@ class OdometryFusion:
         m, o = self._history()
         if len(m) < 3:
             return 0.0
-        return _turn_ratio(m, o, _spread(m, o, 1, self._scale)[1])
+        return _turn_ratio(m, o, _spread(m, o, 1, self.scale())[1])
 
     def learn(self) -> tuple[tuple[float, float, float, float], float]:
         """:meth:`estimate` and :meth:`estimate_turn_ratio` together (noises, turn ratio),
         sharing the arrays and the lag-1 spread they both read."""
         m, o = self._history()
-        v1 = _spread(m, o, 1, self._scale)
+        v1 = _spread(m, o, 1, self.scale())
         return self._estimate(m, o, v1), (_turn_ratio(m, o, v1[1]) if len(m) >= 3 else 0.0)
 
     def _history(self) -> tuple[F64, F64]:
@@ -174,8 +183,9 @@ class OdometryFusion:
         return np.asarray(self.matches[-n:]), np.asarray(self.odoms[-n:])
 
     def scale(self) -> float:
-        """Odometry's translation scale as last estimated (1 until :meth:`ready`)."""
-        return self._scale
+        """Odometry's translation scale as last estimated: :attr:`pairs`' when set, else
+        from the matches against the submap (1 until :meth:`ready`)."""
+        return self._scale if self.pairs is None else self.pairs.scale
 
     def estimate_scale(self) -> float:
         """``sum(m . o) / sum(o . o)`` over lag increments (class docstring), each weighed
@@ -250,14 +260,14 @@ class OdometryFusion:
         """``(odometry translation var, match translation var, heading gain, odometry heading
         var)`` per scan, from the scans so far."""
         m, o = self._history()
-        return self._estimate(m, o, _spread(m, o, 1, self._scale))
+        return self._estimate(m, o, _spread(m, o, 1, self.scale()))
 
     def _estimate(
         self, m: F64, o: F64, v1: tuple[float, float]
     ) -> tuple[float, float, float, float]:
         """:meth:`estimate` from the history ``m``, ``o`` and its lag-1 spread ``v1``."""
         lag = min(self.lag, max((len(m) - 1) // 3, 2))
-        vl = _spread(m, o, lag, self._scale)
+        vl = _spread(m, o, lag, self.scale())
         out = []
         for a, b, cap in zip(v1, vl, self.match_ceilings, strict=True):
             s_o = max(b - a, 0.0) / (lag - 1)

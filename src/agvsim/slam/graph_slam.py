@@ -49,6 +49,7 @@ from agvsim.slam.memory import release_free_heap
 from agvsim.slam.posegraph import PoseGraph, edge_chi2, optimize
 from agvsim.slam.posegraph_graduated import graduated_scales
 from agvsim.slam.relocalise import global_search
+from agvsim.slam.scale_pairs import PairScale, PairScaleConfig
 from agvsim.slam.se2 import between, compose, inverse
 
 __all__ = ["GraphSlam", "SlamConfig"]
@@ -96,6 +97,9 @@ class SlamConfig:
     odometry_floor_rad: float = math.radians(0.02)
     optimize_every: int = 50  # keyframes at least between two optimisations of small closures
     global_relocalisation: bool = True  # search every finished submap when tracking is lost
+    # odometry's scale measured from pairs of raw scans a metre apart, not from matches against
+    # the map tracking drew (agvsim.slam.scale_pairs); None: from those matches, as before
+    scale_pairs: PairScaleConfig | None = field(default_factory=PairScaleConfig)
 
     @classmethod
     def point_samples(cls) -> SlamConfig:
@@ -186,11 +190,26 @@ class GraphSlam:
         # the first scans, kept to be processed again once odometry's and the matches' noises
         # are known (None after that, or without odometry fusion)
         self._warmup: list[tuple] | None = [] if cfg.tracking.fuse_odometry else None
+        tr = cfg.tracking
+        self.pair_scale = (
+            PairScale(
+                tr.resolution_m,
+                tr.sigma_m,
+                tr.surface_gap_m,
+                self.max_range_m,
+                cfg.scale_pairs,
+                tr.odom_floor_m_per_m,
+            )
+            if tr.fuse_odometry and cfg.scale_pairs is not None
+            else None
+        )
         self._reset()
 
     def _reset(self) -> None:
         cfg = self.cfg
         self.tracker = Tracker(cfg.tracking)
+        if self.tracker.fusion is not None:
+            self.tracker.fusion.pairs = self.pair_scale
         self.tracker.max_range_m = self.max_range_m
         self.tracker.sensor_xy = self.laser_offset[:2].copy()
         self.motion = MotionFilter(
@@ -246,6 +265,11 @@ class GraphSlam:
         scan matches are learnt from them (matches against a map odometry built show its
         drift); once enough scans taken on the move are in, they are processed again with the
         two fused (their poses and the first submaps are replaced)."""
+        scan = None
+        if self.pair_scale is not None:
+            # once a scan (the warm-up's scans processed again are not observed twice)
+            scan = self.scan_points(ranges, angles)
+            self.pair_scale.observe(odom_pose, ranges, angles, self.laser_offset, *scan)
         fusion = self.tracker.fusion
         if self._warmup is not None and fusion is not None:
             if fusion.ready() or len(self._warmup) >= _MAX_WARMUP_SCANS:
@@ -264,10 +288,19 @@ class GraphSlam:
                             self._step(*args)
             else:
                 self._warmup.append((timestamp, ranges, angles, odom_pose))
-        return self._step(timestamp, ranges, angles, odom_pose)
+        return self._step(timestamp, ranges, angles, odom_pose, scan)
 
-    def _step(self, timestamp: float, ranges: F64, angles: F64, odom_pose: F64) -> F64:
-        points, ends, hits = self.scan_points(ranges, angles)
+    def _step(
+        self,
+        timestamp: float,
+        ranges: F64,
+        angles: F64,
+        odom_pose: F64,
+        scan: tuple[F64, NDArray[np.float32], NDArray[np.bool_]] | None = None,
+    ) -> F64:
+        """One scan through tracking, mapping and loop closing; ``scan`` its
+        :meth:`scan_points` when already worked out."""
+        points, ends, hits = self.scan_points(ranges, angles) if scan is None else scan
         self.tracker.view = self._view(angles)
         guesses = self.tracker.predict(odom_pose)
         self._odom = self.tracker.odom_now.copy()  # scale-corrected (odometry edges)
