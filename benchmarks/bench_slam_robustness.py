@@ -371,8 +371,9 @@ def map_consistency(slam) -> float:  # type: ignore[no-untyped-def]
 
 
 def tracking_override(spec: str) -> tuple[str, object]:
-    """``FIELD=VALUE`` of ``--tracking``: VALUE read as a Python literal (``None``, ``0.3``,
-    ``True``); a field TrackingConfig lacks is refused by ``dataclasses.replace``."""
+    """``FIELD=VALUE`` of ``--tracking`` (and ``--slam``): VALUE read as a Python literal
+    (``None``, ``0.3``, ``True``); a field the config lacks is refused by
+    ``dataclasses.replace``."""
     import ast
 
     name, sep, value = spec.partition("=")
@@ -423,6 +424,14 @@ def main(argv: list[str] | None = None) -> int:
         metavar="FIELD=VALUE",
         help="override TrackingConfig fields for an A/B run (occluded_reach_m=None)",
     )
+    ap.add_argument(
+        "--slam",
+        nargs="*",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override SlamConfig fields for an A/B run (scale_pairs=None: the scale from "
+        "matches against the submap, as before the twenty-fourth round)",
+    )
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument(
@@ -463,6 +472,14 @@ def main(argv: list[str] | None = None) -> int:
         except (TypeError, ValueError) as exc:
             ap.error(f"--tracking: {exc}")
         config = dataclasses.replace(base_cfg, tracking=tracking)
+    if args.slam:
+        try:
+            config = dataclasses.replace(
+                config if config is not None else SlamConfig(),
+                **dict(tracking_override(x) for x in args.slam),
+            )
+        except (TypeError, ValueError) as exc:
+            ap.error(f"--slam: {exc}")
     if args.seeds < 1:
         ap.error(f"--seeds must be at least 1, got {args.seeds}")
     cases = [

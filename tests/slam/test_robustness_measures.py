@@ -87,6 +87,20 @@ def test_faults_combine_with_plus_and_a_wrong_one_is_named(
     assert "fault 'fast' in 'scale+fast'" in err and "freeze-turn" in err
 
 
+def test_slam_fields_are_overridden_for_an_a_b_run_and_a_wrong_one_is_named(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``--slam scale_pairs=None`` (the old scale estimate) is taken; a field SlamConfig
+    lacks, or a value that is no literal, is refused with the option's name."""
+    bench = _bench()
+    assert bench.main(["--slam", "scale_pairs=None", "--logs", "--faults", "none"]) == 0
+    for bad in ("no_such_field=1", "scale_pairs=off"):
+        with pytest.raises(SystemExit):
+            bench.main(["--slam", bad, "--logs"])
+        err = capsys.readouterr().err
+        assert "--slam" in err and bad.split("=")[0] in err
+
+
 def test_pass_stamps_drive_the_log_there_and_back() -> None:
     # a log stamped 10, 11, 13 (span 3 + 0.1 s): the second pass runs the scans backwards
     # mirrored about 13 and 0.1 s after it (13.1, 15.1, 16.1), the third forwards one span
