@@ -182,3 +182,24 @@ def test_beams_given_in_either_order_measure_the_same() -> None:
         r = np.concatenate([ranges[:90], ranges[91:]])
         ps.observe(odom, r, uneven, np.zeros(3), *slam.scan_points(r, uneven))
     assert len(ps.pairs) == 0 and ps.scale == 1.0
+
+
+def test_an_odometry_jump_leaves_the_estimate_alone() -> None:
+    """Odometry that jumps 8 m along the hall between two scans (a glitch): the pair across
+    the jump is dropped, not measured (at odometry's pose its points do not lie where the
+    other scan saw the same surfaces), and the pairs before and after it measure the scale
+    as without the jump."""
+    truth = straight(2.0, 16.0, 2.0)
+    slam = GraphSlam(30.0)
+    runs = []
+    for jump in (0.0, 8.0):
+        ps = PairScale(0.05, 0.05, 0.5, slam.max_range_m, noise_floor=0.01)
+        for k, (ranges, odom) in enumerate(drive(HALL, truth, 1.05)):
+            o = odom + (np.array([jump, 0.0, 0.0]) if k >= 70 else 0.0)
+            ps.observe(o, ranges, ANGLES, np.zeros(3), *slam.scan_points(ranges, ANGLES))
+        runs.append(ps)
+    plain, jumped = runs
+    assert jumped.n_dropped == plain.n_dropped + 1
+    assert len(jumped.pairs) == len(plain.pairs) - 1
+    assert jumped.scale == pytest.approx(plain.scale, rel=2e-3)
+    assert jumped.scale == pytest.approx(1 / 1.05, rel=5e-3)
