@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from agvsim.slam.graph_slam import GraphSlam, SlamConfig
-from agvsim.slam.scale_pairs import PairScale
+from agvsim.slam.scale_pairs import PairScale, _Scan
 from agvsim.slam.se2 import between, compose
 
 from helpers import cast_segments
@@ -109,7 +109,16 @@ def test_only_points_both_scans_see_are_matched() -> None:
     # points in the second scan's frame: on the wall (x = 2) at y = 0, 1.5, 2.5; and one at
     # x = 4 straight ahead, behind the wall the first scan saw there
     pts = np.array([[2.0, 0.0], [2.0, 1.5], [2.0, 2.5], [4.0, 0.0]])
-    kept, _ = ps._covisible(pts, o, r_ref, angles, np.zeros(3))
+    first = _Scan(
+        np.zeros(3),
+        r_ref,
+        angles,
+        np.zeros(3),
+        np.zeros((0, 2), np.float32),
+        np.zeros(0, bool),
+        np.zeros((0, 2)),
+    )
+    kept, _ = ps._covisible(pts, o, first)
     assert kept.tolist() == [[2.0, 0.0], [2.0, 1.5]]
 
 

@@ -97,7 +97,7 @@ def actuate_car(
             if abs(vx) < 1e-12 and abs(w) < 1e-12:
                 target = now
             else:
-                target = _heading(vx - w * 0.0, 0.0 + w * L)[0]
+                target = _heading(vx, w * L)[0]  # the front wheel at (L, 0)
         else:
             target = cmd_wheels[i, n_drive]
         target = min(max(target, -max_d), max_d)
@@ -128,8 +128,8 @@ def actuate_car(
         else:
             ox = r * (d0 + d1) / 2.0
             ow = ox * math.tan(s) / L
-            wheels[i, 0] = _heading(ox - ow * l, 0.0 + ow * L)[1] / r
-            wheels[i, 1] = _heading(ox - ow * (-l), 0.0 + ow * L)[1] / r
+            wheels[i, 0] = _heading(ox - ow * l, ow * L)[1] / r
+            wheels[i, 1] = _heading(ox + ow * l, ow * L)[1] / r
             wheels[i, 2], wheels[i, 3] = d0, d1
             if parallel:
                 angles[i, 0], angles[i, 1] = s, s

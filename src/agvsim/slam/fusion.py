@@ -136,7 +136,8 @@ class OdometryFusion:
             # it show odometry's drift (GraphSlam then processes these scans again)
             return guess.copy()
         if self.ready() and self._count % 10 == 0:
-            self._scale = self.estimate_scale()
+            if self.pairs is None:
+                self._scale = self.estimate_scale()
             self._k, self.turn_ratio = self.learn()
         s_o, s_m, k_rot, s_or = self._k
         if step is not None:
@@ -247,7 +248,8 @@ class OdometryFusion:
         self.odoms.append(odom.copy())
         self._raw = None
         self._count += 1
-        self._update_scale_sums()
+        if self.pairs is None:  # else the scale is the pairs' (scale())
+            self._update_scale_sums()
         keep = self.window + self.lag + 1
         if len(self.odoms) > keep:
             del self.odoms[0]

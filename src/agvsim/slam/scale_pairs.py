@@ -46,12 +46,26 @@ from agvsim.slam.se2 import between, inverse
 __all__ = ["PairScale", "PairScaleConfig"]
 
 F64 = NDArray[np.float64]
-# a scan as a pair keeps it: odometry pose, ranges and beam angles (laser frame), the laser's
-# mount pose, map rays (ends, hit flags; robot frame), matching points (robot frame)
-_Scan = tuple[F64, F64, F64, F64, NDArray[np.float32], NDArray[np.bool_], F64]
 _NORMAL_BEAMS = 6  # a beam's normal from neighbours up to this many beams away each way
 _NORMAL_SPAN_M = 0.6  # ... no farther apart than this (a corner nearby stays out)
 _NORMAL_MIN_SPAN_M = 0.15  # ... and no nearer: over a shorter chord range noise turns it
+
+
+@dataclass
+class _Scan:
+    """A scan as a pair keeps it, and what is worked out from it once (a scan ends one pair
+    and starts the next, so it is matched on twice)."""
+
+    odom: F64  # odometry pose as given
+    ranges: F64  # raw beams, laser frame
+    angles: F64
+    mount: F64  # the laser's pose on the robot
+    ends: NDArray[np.float32]  # map rays, robot frame (GraphSlam.scan_points)
+    hits: NDArray[np.bool_]
+    points: F64  # matching points, robot frame
+    joined: NDArray[np.bool_] | None = None  # PairScale._surface
+    normals: F64 | None = None
+    field: tuple[NDArray[np.float32], float, float] | None = None  # PairScale._field
 
 
 @dataclass(frozen=True)
@@ -121,7 +135,7 @@ class PairScale:
         if self._last is not None:
             self._path += math.hypot(odom[0] - self._last[0], odom[1] - self._last[1])
         self._last = odom.copy()
-        here = (
+        here = _Scan(
             odom.copy(),
             np.asarray(ranges, np.float64),
             np.asarray(angles, np.float64),
@@ -133,7 +147,7 @@ class PairScale:
         if self._ref is None:
             self._ref, self._path = here, 0.0
             return
-        o = between(self._ref[0], odom)
+        o = between(self._ref.odom, odom)
         if abs(o[2]) > self.cfg.max_turn_rad:
             self._ref, self._path = here, 0.0  # turned too far: little overlap, start again
             self.n_dropped += 1
@@ -160,7 +174,7 @@ class PairScale:
         # inverse, and the direction of travel in that frame is d turned back by the heading
         c, s = math.cos(o[2]), math.sin(o[2])
         d_back = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
-        back = self._match(here, inverse(o), self._ref[6], d_back)
+        back = self._match(here, inverse(o), self._ref.points, d_back)
         if fwd is None or back is None:
             return None
         along = 0.5 * (float(d @ fwd[0][:2]) + float(d @ inverse(back[0])[:2]))
@@ -171,24 +185,17 @@ class PairScale:
         scan's odometry pose in ``ref``'s frame): the pose found and the information along
         the direction of travel ``d`` (unit, ``ref``'s frame); None for a poor match, or one
         with under ``min_facing`` of that information."""
-        _, r_ref, a_ref, mount, ends, hits, _ = ref
-        pts, beam = self._covisible(points, o, r_ref, a_ref, mount)
+        pts, beam = self._covisible(points, o, ref)
         if len(pts) < self.cfg.min_points:
             return None
-        c, s = math.cos(mount[2]), math.sin(mount[2])
+        c, s = math.cos(ref.mount[2]), math.sin(ref.mount[2])
         d_laser = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
-        info = float(np.nansum((self._normals(r_ref, a_ref)[beam] @ d_laser) ** 2))
+        _, normals = self._surface(ref)
+        info = float(np.nansum((normals[beam] @ d_laser) ** 2))
         if not info >= self.cfg.min_facing:
             return None
+        field, ox, oy = self._field(ref)
         res = self.res
-        surface = densify_surface(ends, hits, self.gap, 0.5 * res)
-        pad = self.kernel.shape[0] * res
-        ox = math.floor((float(surface[:, 0].min()) - pad) / res) * res
-        oy = math.floor((float(surface[:, 1].min()) - pad) / res) * res
-        w = int(math.ceil((float(surface[:, 0].max()) + pad - ox) / res)) + 1
-        h = int(math.ceil((float(surface[:, 1].max()) + pad - oy) / res)) + 1
-        field = np.zeros((h, w), np.float32)
-        stamp_points(field, ox, oy, res, surface, self.kernel)
         far = float(np.percentile(np.hypot(pts[:, 0], pts[:, 1]), 98))
         step = sm.angular_step(res, max(far, 3.0))
         # odometry may be off by as much as the clamp allows, along its direction
@@ -204,68 +211,79 @@ class PairScale:
             return None
         return pose, info
 
-    def _covisible(
-        self, points: F64, o: F64, r_ref: F64, a_ref: F64, mount: F64
-    ) -> tuple[F64, NDArray[np.int64]]:
-        """The points (robot frame) that, placed at ``o`` in the other scan's robot frame,
-        lie within ``covisible_m`` of where its beam in their direction returned, on a surface
-        it drew as a ridge (:meth:`_joined`); and that beam's index for each."""
+    def _covisible(self, points: F64, o: F64, ref: _Scan) -> tuple[F64, NDArray[np.int64]]:
+        """The points (robot frame) that, placed at ``o`` in ``ref``'s robot frame, lie within
+        ``covisible_m`` of where its beam in their direction returned, on a surface it drew as
+        a ridge (:meth:`_surface`); and that beam's index for each (beams evenly spaced:
+        :meth:`observe`)."""
+        a_ref, mount = ref.angles, ref.mount
         c, s = math.cos(o[2]), math.sin(o[2])
         x = o[0] + c * points[:, 0] - s * points[:, 1] - mount[0]
         y = o[1] + s * points[:, 0] + c * points[:, 1] - mount[1]
         dist = np.hypot(x, y)
         bearing = np.arctan2(y, x) - mount[2]
         n = len(a_ref)
-        inc = (a_ref[-1] - a_ref[0]) / (n - 1) if n >= 2 else 0.0
-        if inc == 0.0:
-            return points[:0], np.zeros(0, np.int64)
+        inc = (a_ref[-1] - a_ref[0]) / (n - 1)
         step = abs(inc)
         rel = np.mod(math.copysign(1.0, inc) * (bearing - a_ref[0]) + 0.5 * step, 2.0 * math.pi)
         idx = np.rint((rel - 0.5 * step) / step).astype(np.int64)
         inside = (idx >= 0) & (idx < n)
         r = np.full(len(points), np.inf)
-        r[inside] = r_ref[idx[inside]]
+        r[inside] = ref.ranges[idx[inside]]
         ok = np.abs(dist - r) <= self.cfg.covisible_m
-        ok[inside] &= self._joined(r_ref, a_ref)[idx[inside]]
+        ok[inside] &= self._surface(ref)[0][idx[inside]]
         return np.ascontiguousarray(points[ok]), idx[ok]
 
-    def _points(self, r: F64, a: F64) -> tuple[F64, NDArray[np.bool_], NDArray[np.bool_]]:
-        """The beams' returns (laser frame; 0 where none within range), which returned, and
-        which neighbouring pairs lie on one surface (within ``surface_gap_m``; (n - 1,))."""
-        ok = np.isfinite(r) & (r > 0.0) & (r <= self.max_range_m)
-        rr = np.where(ok, r, 0.0)
-        p = np.column_stack([rr * np.cos(a), rr * np.sin(a)])
-        link = ok[:-1] & ok[1:] & (np.hypot(*np.diff(p, axis=0).T) <= self.gap)
-        return p, ok, link
+    def _surface(self, scan: _Scan) -> tuple[NDArray[np.bool_], F64]:
+        """Which beams lie on one surface with both neighbours (a ridge in the field), and
+        each beam's surface normal (laser frame, unit; nan where unknown); worked out once a
+        scan.
 
-    def _joined(self, r: F64, a: F64) -> NDArray[np.bool_]:
-        """Beams whose return lies on one surface with both neighbours' (a ridge in the
-        field). A wall seen edge-on far off is sampled metres apart: its returns are bumps,
-        which hold a match on the other scan's beam pattern along the wall."""
-        _, _, link = self._points(r, a)
-        out = np.zeros(len(r), bool)
-        out[1:-1] = link[:-1] & link[1:]
-        return out
+        Neighbouring returns lie on one surface when within ``surface_gap_m``. A wall seen
+        edge-on far off is sampled metres apart: its returns are bumps, which hold a match on
+        the other scan's beam pattern along the wall. The normal is across the chord to the
+        farthest neighbours, up to ``_NORMAL_BEAMS`` beams each way, on one surface with the
+        beam and no more than ``_NORMAL_SPAN_M`` apart; unknown where that chord is under
+        ``_NORMAL_MIN_SPAN_M`` (range noise would turn it)."""
+        if scan.joined is None or scan.normals is None:
+            r, a = scan.ranges, scan.angles
+            n = len(r)
+            ok = np.isfinite(r) & (r > 0.0) & (r <= self.max_range_m)
+            rr = np.where(ok, r, 0.0)
+            p = np.column_stack([rr * np.cos(a), rr * np.sin(a)])
+            link = ok[:-1] & ok[1:] & (np.hypot(*np.diff(p, axis=0).T) <= self.gap)
+            joined = np.zeros(n, bool)
+            joined[1:-1] = link[:-1] & link[1:]
+            broken = np.concatenate([[0], np.cumsum(~link)])  # broken links before each beam
+            tangent = np.full((n, 2), np.nan)
+            for k in range(1, _NORMAL_BEAMS + 1):
+                if n <= 2 * k:
+                    break
+                i = np.arange(k, n - k)
+                chord = p[i + k] - p[i - k]
+                span = np.hypot(chord[:, 0], chord[:, 1])
+                use = (broken[i + k] == broken[i - k]) & (span <= _NORMAL_SPAN_M)
+                use &= span >= _NORMAL_MIN_SPAN_M
+                tangent[i[use]] = chord[use] / span[use, None]
+            scan.joined = joined
+            scan.normals = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+        return scan.joined, scan.normals
 
-    def _normals(self, r: F64, a: F64) -> F64:
-        """Each beam's surface normal (laser frame, unit; nan where unknown): across the
-        chord to the farthest neighbours, up to ``_NORMAL_BEAMS`` beams each way, that lie on
-        one surface with it and no more than ``_NORMAL_SPAN_M`` apart; unknown where that
-        chord is under ``_NORMAL_MIN_SPAN_M`` (range noise would turn it)."""
-        p, _, link = self._points(r, a)
-        n = len(r)
-        broken = np.concatenate([[0], np.cumsum(~link)])  # broken links before each beam
-        tangent = np.full((n, 2), np.nan)
-        for k in range(1, _NORMAL_BEAMS + 1):
-            if n <= 2 * k:
-                break
-            i = np.arange(k, n - k)
-            chord = p[i + k] - p[i - k]
-            span = np.hypot(chord[:, 0], chord[:, 1])
-            use = (broken[i + k] == broken[i - k]) & (span <= _NORMAL_SPAN_M)
-            use &= span >= _NORMAL_MIN_SPAN_M
-            tangent[i[use]] = chord[use] / span[use, None]
-        return np.column_stack([-tangent[:, 1], tangent[:, 0]])
+    def _field(self, scan: _Scan) -> tuple[NDArray[np.float32], float, float]:
+        """The likelihood field of the scan's returns, neighbouring ones joined (robot frame),
+        and its corner; worked out once a scan."""
+        if scan.field is None:
+            res = self.res
+            surface = densify_surface(scan.ends, scan.hits, self.gap, 0.5 * res)
+            pad = self.kernel.shape[0] * res
+            ox = math.floor((float(surface[:, 0].min()) - pad) / res) * res
+            oy = math.floor((float(surface[:, 1].min()) - pad) / res) * res
+            w = int(math.ceil((float(surface[:, 0].max()) + pad - ox) / res)) + 1
+            h = int(math.ceil((float(surface[:, 1].max()) + pad - oy) / res)) + 1
+            field = np.zeros((h, w), np.float32)
+            stamp_points(field, ox, oy, res, surface, self.kernel)
+            scan.field = (field, ox, oy)
+        return scan.field
 
     def estimate(self) -> tuple[float, float, float]:
         """``(k, standard error, path m)`` from the pairs kept; ``(1, inf, path)`` with too
